@@ -1,0 +1,27 @@
+"""motion-refiner: refine synthesized 3D human motion with unsupervised learned motion concepts."""
+from __future__ import annotations
+
+from refiner.motion import Motion, stack_motions, unstack_motions
+from refiner.skeletons import Skeleton, get_skeleton, list_skeletons, register_skeleton
+
+__all__ = [
+    "Motion",
+    "Skeleton",
+    "__version__",
+    "get_skeleton",
+    "list_skeletons",
+    "register_skeleton",
+    "stack_motions",
+    "unstack_motions",
+]
+
+
+def __getattr__(name):
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            return version("motion-refiner")
+        except PackageNotFoundError:
+            return "unknown"
+    raise AttributeError(f"module 'refiner' has no attribute {name!r}")

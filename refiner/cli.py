@@ -1,0 +1,89 @@
+"""The ``motion-refiner`` command line: one sub-command per job.
+
+Each sub-command is a pair ``(add_arguments, run)`` in ``COMMANDS``; ``run`` returns the exit code.
+Only this module and ``refiner.bench`` write to stdout.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Callable, Sequence
+
+__all__ = ["main", "COMMANDS"]
+
+
+def _concepts_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dataset", default="humanact12", choices=["humanact12", "cmu_mocap"])
+    p.add_argument("--data", type=Path, default=None, help="dataset file or folder (default: ../shared/data/...)")
+    p.add_argument("--split", default="all", choices=["all", "train", "test"])
+    p.add_argument("--out", type=Path, required=True, help="folder to write the concepts to")
+    p.add_argument("--penalty", type=float, default=None, help="segmentation λ in cm² per joint (default 200)")
+    p.add_argument("--n-clusters", type=int, default=8, help="anchor concepts per action")
+    p.add_argument("--seed", type=int, default=0)
+
+
+def _concepts_run(args: argparse.Namespace) -> int:
+    from refiner.concepts import learn_concepts
+    from refiner.datasets import load_dataset
+    from refiner.segmentation import DEFAULT_PENALTY
+
+    dataset = load_dataset(args.dataset, args.data)
+    concepts = learn_concepts(
+        dataset, split=args.split, penalty=args.penalty or DEFAULT_PENALTY, n_clusters=args.n_clusters,
+        random_state=args.seed, progress=True,
+    )
+    concepts.save(args.out)
+    s = concepts.summary()
+    print(f"dataset      {args.dataset} ({args.split})")
+    print(f"clips        {s['clips']}")
+    print(f"anchors      {s['anchors']}")
+    print(f"transitions  {s['transitions']}  ({s['mean_transitions_per_clip']:.2f} per clip, "
+          f"{s['mean_transition_frames']:.1f} frames each)")
+    print("clusters     " + ", ".join(f"{a}={k}" for a, k in s["clusters_per_action"].items()))
+    print(f"seconds      {s['seconds']:.1f}")
+    print(f"written to   {args.out}")
+    return 0
+
+
+def _bench_arguments(p: argparse.ArgumentParser) -> None:
+    from refiner.bench import SUITES
+
+    p.add_argument("suite", nargs="?", default="all", choices=[*SUITES, "all"])
+    p.add_argument("--data", type=Path, default=None, help="folder holding humanact12/ (default: ../shared/data)")
+    p.add_argument("--out", type=Path, default=None, help="folder for REPORT.md and plots")
+    p.add_argument("--quick", action="store_true", help="tiny configuration (for tests)")
+
+
+def _bench_run(args: argparse.Namespace) -> int:
+    from refiner.bench import run_benchmarks
+
+    return run_benchmarks(args.suite, data=args.data, out=args.out, quick=args.quick)
+
+
+COMMANDS: dict[str, tuple[str, Callable, Callable]] = {
+    "concepts": ("learn motion concepts from a dataset", _concepts_arguments, _concepts_run),
+    "bench": ("run benchmarks and print figures", _bench_arguments, _bench_run),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="motion-refiner", description="Refine synthesized 3D human motion.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name, (help_text, add_arguments, _) in COMMANDS.items():
+        add_arguments(sub.add_parser(name, help=help_text, description=help_text))
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    _, _, run = COMMANDS[args.command]
+    try:
+        return run(args)
+    except ValueError as e:
+        print(f"motion-refiner {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
