@@ -200,6 +200,7 @@ def keyframe_strip(
     """
     rows = _as_rows(motions_or_rows, skeleton)
     _check_view(view)
+    out = None if path is None else _out_path(path, (".png",))
     n_min = min(m.n_frames for m in rows)
     flags = _check_frames(flagged, n_min, name="flagged", allow_mask=True)
     if frames is None:
@@ -232,10 +233,11 @@ def keyframe_strip(
                     ax.text2D(-0.08, 0.5, labels[r], transform=ax.transAxes, rotation=90, ha="right", va="center")
                 else:
                     ax.set_ylabel(labels[r], fontsize=9)
-    fig.subplots_adjust(left=0.3 / fig.get_figwidth() + 0.01, right=0.99, bottom=0.01, top=1 - 0.3 / fig.get_figheight(),
+    fig.subplots_adjust(left=0.3 / fig.get_figwidth() + 0.01, right=0.99, bottom=0.01,
+                        top=1 - 0.3 / fig.get_figheight(),
                         wspace=0.05, hspace=0.05)
-    if path is not None:
-        fig.savefig(_out_path(path, (".png",)), dpi=dpi, facecolor="white")
+    if out is not None:
+        fig.savefig(out, dpi=dpi, facecolor="white")
     return fig
 
 
@@ -299,7 +301,9 @@ def animate(
         raise ValueError(f"`fps` must be a number in (0, 100]; got {fps!r}.")
     out = _out_path(path, (".gif", ".mp4"))
     ffmpeg = shutil.which("ffmpeg") is not None
-    targets = [out] if out.suffix.lower() == ".mp4" else [out] + ([out.with_suffix(".mp4")] if mp4 or (mp4 is None and ffmpeg) else [])
+    targets = [out]
+    if out.suffix.lower() == ".gif" and (mp4 or (mp4 is None and ffmpeg)):
+        targets.append(out.with_suffix(".mp4"))
     if any(t.suffix.lower() == ".mp4" for t in targets) and not ffmpeg:
         raise ValueError("MP4 output needs `ffmpeg` on PATH; install it or write a .gif with mp4=False.")
 
@@ -382,12 +386,14 @@ def plot_scores(
     if not np.isfinite(s).all():
         bad = np.flatnonzero(~np.isfinite(s))
         raise ValueError(f"`scores` contains {bad.size} NaN or Inf values (first at frame {bad[0]}).")
-    if isinstance(threshold, (bool, np.bool_)) or not isinstance(threshold, (int, float, np.number)) or not np.isfinite(threshold):
+    is_number = isinstance(threshold, (int, float, np.number)) and not isinstance(threshold, (bool, np.bool_))
+    if not (is_number and np.isfinite(threshold)):
         raise ValueError(f"`threshold` must be a finite number; got {threshold!r}.")
     anchor_idx = _check_frames(anchors, s.size, name="anchors", allow_mask=False)
     flag_idx = _check_frames(flagged, s.size, name="flagged", allow_mask=True)
     if fps is not None and not (isinstance(fps, (int, float, np.number)) and np.isfinite(fps) and fps > 0):
         raise ValueError(f"`fps` must be a positive number; got {fps!r}.")
+    out = None if path is None else _out_path(path, (".png",))
     x = np.arange(s.size) / (fps or 1.0)
 
     fig = _figure(7.0, 2.8, dpi=100)
@@ -407,8 +413,8 @@ def plot_scores(
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8, framealpha=0.8)
     fig.tight_layout()
-    if path is not None:
-        fig.savefig(_out_path(path, (".png",)), dpi=100, facecolor="white")
+    if out is not None:
+        fig.savefig(out, dpi=100, facecolor="white")
     return fig
 
 

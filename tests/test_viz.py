@@ -205,6 +205,8 @@ def test_plot_scores_png(tmp_path):
         (lambda: viz.plot_scores(np.zeros(3), float("nan")), "threshold"),
         (lambda: viz.plot_scores(np.zeros(3), 0.5, anchors=[3]), "anchors"),
         (lambda: viz.plot_scores(np.zeros(3), 0.5, anchors=[0.5]), "integer"),
+        (lambda: viz.plot_scores(np.zeros(3), 0.5, path="scores.jpg"), ".png"),
+        (lambda: viz.keyframe_strip(_moving_clip(5), path="/no/such/folder/s.png"), "does not exist"),
     ],
 )
 def test_bad_input(call, match):
