@@ -1,11 +1,13 @@
 """motion-refiner: refine synthesized 3D human motion with unsupervised learned motion concepts."""
 from __future__ import annotations
 
+from refiner.generators import RefinedGenerator
 from refiner.motion import Motion, stack_motions, unstack_motions
 from refiner.skeletons import Skeleton, get_skeleton, list_skeletons, register_skeleton
 
 __all__ = [
     "Motion",
+    "RefinedGenerator",
     "Skeleton",
     "__version__",
     "get_skeleton",

@@ -1,0 +1,91 @@
+"""MLD adapter: (B, T, 150) feature-major rot6d features to ACTOR's layout, then SMPL (generator_formats.md §4).
+
+MLD flattens ACTOR's (B, 25, 6, T) tensor per frame as (B, T, 6, 25): for a 150-vector v, joint j's
+6D is ``v[j], v[25+j], ..., v[125+j]`` and the translation ``v[24], v[49], v[74]``. After
+reshaping, conversion is the ACTOR path (SMPL ``jointstype="smpl"``, ``vertstrans=True``).
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from refiner.adapters import actor
+from refiner.adapters.base import AdapterInfo, call_with_options, check_raw
+from refiner.motion import Motion
+from refiner.plugins import hookimpl
+
+__all__ = ["INFO", "actor_to_features", "features_to_actor", "to_motions"]
+
+INFO = AdapterInfo(
+    name="mld",
+    format=(
+        "m_rst features (B, T, 150) or (T, 150), feature-major ACTOR rot6d + translation; optional "
+        "lengths/mask; needs the SMPL neutral model (smpl_path or $MOTION_REFINER_SMPL)"
+    ),
+    skeletons=("humanact12", "uestc"),
+    fps=20.0,
+    up="-y",
+    description="MLD (Chen et al. 2023), action-conditioned HumanAct12 checkpoint; UESTC layout via SMPL 'a2m'.",
+)
+
+
+def features_to_actor(features) -> np.ndarray:
+    """MLD features ``(B, T, 150)`` or ``(T, 150)`` to ACTOR's ``(B, 25, 6, T)`` float32 (MLD's inverse collate).
+
+    Raises ``ValueError`` for any other shape.
+    """
+    x = check_raw(features, name="features", ndims=(2, 3), last=(150,), what="(B, T, 150) or (T, 150)")
+    if x.ndim == 2:
+        x = x[None]
+    b, t, _ = x.shape
+    return x.reshape(b, t, 6, 25).transpose(0, 3, 2, 1).astype(np.float32)  # (B, 25, 6, T)
+
+
+def actor_to_features(output) -> np.ndarray:
+    """ACTOR's ``(B, 25, 6, T)`` to MLD's ``(B, T, 150)`` float32 (MLD's collate; inverse of :func:`features_to_actor`)."""
+    x = check_raw(output, name="output", ndims=(4,), what="(B, 25, 6, T)")
+    if x.shape[1:3] != (25, 6):
+        raise ValueError(f"`output` must have shape (B, 25, 6, T); got {tuple(x.shape)}.")
+    return x.transpose(0, 3, 2, 1).reshape(x.shape[0], x.shape[3], 150).astype(np.float32)
+
+
+def to_motions(
+    output: Any,
+    *,
+    mask=None,
+    lengths: Sequence[int] | None = None,
+    skeleton: str | None = None,
+    smpl_path=None,
+    j_regressor_extra=None,
+    vertstrans: bool = True,
+    actions: Sequence[int | None] | None = None,
+    fps: float = 20.0,
+) -> list[Motion]:
+    """MLD features ``(B, T, 150)`` (``m_rst``) to canonical motions through SMPL.
+
+    Parameters are those of :func:`refiner.adapters.actor.rot6d_to_joints`; ``mask`` (B, T) or
+    ``lengths`` (B,) select the valid frames of padded batches.
+    """
+    return actor.to_motions(
+        features_to_actor(output), mask=mask, lengths=lengths, skeleton=skeleton, smpl_path=smpl_path,
+        j_regressor_extra=j_regressor_extra, vertstrans=vertstrans, actions=actions, fps=fps,
+    )
+
+
+# --- plugin hooks ------------------------------------------------------------------------------
+
+
+@hookimpl
+def refiner_adapter_info() -> AdapterInfo:
+    return INFO
+
+
+@hookimpl
+def refiner_convert_output(adapter: str, output: Any, skeleton: str | None, options: Mapping[str, Any]):
+    if adapter != INFO.name:
+        return None
+    opts = dict(options)
+    if skeleton is not None:
+        opts["skeleton"] = skeleton
+    return call_with_options(to_motions, output, opts, adapter=INFO.name)

@@ -1,0 +1,297 @@
+"""The plugin manager: hook specs, built-in adapters, entry-point plugins and adapter look-ups.
+
+Plugins are isolated from each other: one that fails to import, fails pluggy's validation,
+implements a misspelled hook or raises while describing itself is skipped with an
+:class:`AdapterPluginWarning` naming it, and the others keep working.
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+import os
+import warnings
+from typing import TYPE_CHECKING, Any, Callable, Mapping
+
+import pluggy
+
+from refiner.plugins import PROJECT_NAME, hookspecs
+
+if TYPE_CHECKING:
+    from refiner.adapters.base import AdapterInfo
+    from refiner.motion import Motion
+
+__all__ = [
+    "AdapterPluginWarning",
+    "DISABLE_AUTOLOAD_ENV",
+    "ENTRY_POINT_GROUP",
+    "PluginManager",
+    "convert",
+    "get_adapter",
+    "get_plugin_manager",
+    "list_adapters",
+]
+
+ENTRY_POINT_GROUP = "motion_refiner.adapters"
+#: Set (to anything non-empty) to skip entry-point plugins, like ``PYTEST_DISABLE_PLUGIN_AUTOLOAD``.
+DISABLE_AUTOLOAD_ENV = "MOTION_REFINER_DISABLE_PLUGIN_AUTOLOAD"
+BUILTIN_SOURCE = "built-in"
+
+
+class AdapterPluginWarning(UserWarning):
+    """A plugin was skipped or misbehaved; the message names it."""
+
+
+class PluginManager(pluggy.PluginManager):
+    """pluggy's manager for the ``motion_refiner`` hooks, plus adapter look-ups.
+
+    Attributes
+    ----------
+    sources : dict of str to str
+        Plugin name -> where it came from (``"built-in"``, ``"<dist> <version>"`` or
+        ``"registered"`` for plugins added with :meth:`register` by hand).
+    """
+
+    def __init__(self) -> None:
+        super().__init__(PROJECT_NAME)
+        self.add_hookspecs(hookspecs)
+        self.sources: dict[str, str] = {}
+
+    def adapters(self) -> dict[str, AdapterInfo]:
+        """Every registered adapter by name, sorted, with ``source`` filled in."""
+        from dataclasses import replace
+
+        infos = {}
+        for impl in self.hook.refiner_adapter_info.get_hookimpls():
+            info = _call_isolated(impl, {}, "refiner_adapter_info")
+            if info is None or info.name in infos:
+                continue
+            infos[info.name] = replace(info, source=self.sources.get(impl.plugin_name, "registered"))
+        return dict(sorted(infos.items()))
+
+    def get_adapter(self, name: str) -> AdapterInfo:
+        """The :class:`~refiner.adapters.base.AdapterInfo` of adapter *name*.
+
+        Raises
+        ------
+        ValueError
+            Unknown name; the message lists the known adapters.
+        """
+        infos = self.adapters()
+        if not isinstance(name, str) or name not in infos:
+            raise ValueError(f"unknown adapter {name!r}; known adapters: {', '.join(infos) or '(none)'}.")
+        return infos[name]
+
+    def recognize(self, generator: Any) -> str | None:
+        """Adapter name from the first plugin that recognises *generator*, or None.
+
+        Each plugin is asked in hook-call order; one that raises or names an unknown adapter
+        is reported with a warning and skipped.
+        """
+        known = self.adapters()
+        for impl in reversed(self.hook.refiner_recognize_generator.get_hookimpls()):
+            name = _call_isolated(impl, {"generator": generator}, "refiner_recognize_generator", expect=None)
+            if name is None:
+                continue
+            if name not in known:
+                warnings.warn(
+                    f"motion-refiner plugin {impl.plugin_name!r}: refiner_recognize_generator returned "
+                    f"unknown adapter {name!r}; ignored.", AdapterPluginWarning, stacklevel=2,
+                )
+                continue
+            return name
+        return None
+
+    def sample(self, adapter: str, generator: Any, action: Any, n: int, options: Mapping[str, Any]) -> Any:
+        """Raw output from the ``refiner_sample_generator`` hook, or None when no plugin implements it."""
+        return self.hook.refiner_sample_generator(
+            adapter=adapter, generator=generator, action=action, n=n, options=dict(options)
+        )
+
+    def convert(
+        self,
+        adapter: str,
+        output: Any,
+        *,
+        generator: Any = None,
+        skeleton: str | None = None,
+        options: Mapping[str, Any] | None = None,
+    ) -> list[Motion]:
+        """Convert raw *output* with adapter *adapter* into canonical motions.
+
+        Raises
+        ------
+        ValueError
+            Unknown adapter, a skeleton the adapter cannot produce, or whatever the adapter
+            rejects in *output* / *options*.
+        """
+        from refiner.motion import Motion
+
+        info = self.get_adapter(adapter)
+        if skeleton is not None and skeleton not in info.skeletons:
+            raise ValueError(
+                f"adapter {adapter!r} cannot produce skeleton {skeleton!r}; it produces: {', '.join(info.skeletons)}."
+            )
+        motions = self.hook.refiner_convert_output(
+            adapter=adapter, output=output, generator=generator, skeleton=skeleton, options=dict(options or {})
+        )
+        if motions is None:
+            raise ValueError(f"adapter {adapter!r} ({info.source}) does not implement refiner_convert_output.")
+        if isinstance(motions, Motion):
+            motions = [motions]
+        motions = list(motions)
+        if not all(isinstance(m, Motion) for m in motions):
+            kinds = sorted({type(m).__name__ for m in motions})
+            raise TypeError(f"adapter {adapter!r} ({info.source}) must return Motion objects; got {', '.join(kinds)}.")
+        return motions
+
+
+def get_plugin_manager(autoload: bool = True) -> PluginManager:
+    """A plugin manager with the hook specs, the built-in adapters and installed plugins.
+
+    In order: built-in modules named in ``refiner.adapters.BUILTIN_ADAPTERS`` are registered
+    under their names; then plugins of the ``motion_refiner.adapters`` entry-point group are
+    loaded (skipping names already registered, so built-ins listed there too are harmless),
+    unless ``autoload`` is False or ``$MOTION_REFINER_DISABLE_PLUGIN_AUTOLOAD`` is set; finally
+    ``check_pending()``. A plugin that fails to import, to register or to describe itself is
+    skipped with an :class:`AdapterPluginWarning` naming it.
+
+    Parameters
+    ----------
+    autoload : bool, default=True
+        Load entry-point plugins (hermetic tests pass False).
+
+    Returns
+    -------
+    PluginManager
+    """
+    from refiner.adapters import BUILTIN_ADAPTERS
+
+    pm = PluginManager()
+    for name in BUILTIN_ADAPTERS:
+        module = f"refiner.adapters.{name}"
+        _add_plugin(pm, name, lambda module=module: importlib.import_module(module), BUILTIN_SOURCE)
+    if autoload and not os.environ.get(DISABLE_AUTOLOAD_ENV):
+        _load_entry_points(pm)
+    pm.check_pending()
+    return pm
+
+
+def get_adapter(name: str, pm: PluginManager | None = None) -> AdapterInfo:
+    """:class:`AdapterInfo` of adapter *name*; ``ValueError`` listing the known ones if unknown."""
+    return (pm or get_plugin_manager()).get_adapter(name)
+
+
+def list_adapters(pm: PluginManager | None = None) -> list[AdapterInfo]:
+    """Every installed adapter, sorted by name."""
+    return list((pm or get_plugin_manager()).adapters().values())
+
+
+def convert(
+    adapter: str,
+    output: Any,
+    *,
+    skeleton: str | None = None,
+    generator: Any = None,
+    pm: PluginManager | None = None,
+    **options: Any,
+) -> list[Motion]:
+    """Convert raw generator *output* (e.g. loaded from a file) with the named adapter.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> motions = convert("action2motion", np.zeros((2, 60, 72)), representation="xyz")
+    >>> len(motions), motions[0].joints.shape
+    (2, (60, 24, 3))
+    """
+    return (pm or get_plugin_manager()).convert(adapter, output, generator=generator, skeleton=skeleton, options=options)
+
+
+# --- private helpers -----------------------------------------------------------------------------
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, AdapterPluginWarning, stacklevel=3)
+
+
+def _add_plugin(pm: PluginManager, name: str, load: Callable[[], object], source: str) -> bool:
+    """Load, register and validate one plugin; on any failure warn, undo and return False."""
+    try:
+        plugin = load()
+    except Exception as e:  # noqa: BLE001 -- a broken plugin must not break the others
+        _warn(f"motion-refiner plugin {name!r} ({source}) failed to import and was skipped: {type(e).__name__}: {e}")
+        return False
+    try:
+        pm.register(plugin, name=name)
+    except Exception as e:  # noqa: BLE001 -- PluginValidationError, duplicate registration
+        _warn(f"motion-refiner plugin {name!r} ({source}) could not be registered and was skipped: {e}")
+        return False
+    problem = _validate(pm, plugin, name)
+    if problem:
+        pm.unregister(plugin=plugin, name=name)
+        _warn(f"motion-refiner plugin {name!r} ({source}) was skipped: {problem}")
+        return False
+    pm.sources[name] = source
+    return True
+
+
+def _validate(pm: PluginManager, plugin: object, name: str) -> str | None:
+    """Why *plugin* cannot be used (misspelled hook, bad adapter info, taken name), or None."""
+    from refiner.adapters.base import AdapterInfo
+    from refiner.skeletons import list_skeletons
+
+    for caller in pm.get_hookcallers(plugin) or []:
+        if not caller.has_spec() and any(
+            impl.plugin is plugin and not impl.optionalhook for impl in caller.get_hookimpls()
+        ):
+            return f"hook {caller.name!r} is not a motion-refiner hook (misspelled?)."
+    impls = pm.hook.refiner_adapter_info.get_hookimpls()
+    taken = set()
+    for impl in impls:
+        if impl.plugin is not plugin:
+            info = _call_isolated(impl, {}, "refiner_adapter_info", quiet=True)
+            if info is not None:
+                taken.add(info.name)
+    for impl in impls:
+        if impl.plugin is not plugin:
+            continue
+        try:
+            info = impl.function()
+        except Exception as e:  # noqa: BLE001
+            return f"refiner_adapter_info raised {type(e).__name__}: {e}"
+        if not isinstance(info, AdapterInfo):
+            return f"refiner_adapter_info must return an AdapterInfo; got {type(info).__name__}."
+        if info.name in taken:
+            return f"adapter name {info.name!r} is already taken by another plugin."
+        unknown = [s for s in info.skeletons if s not in list_skeletons()]
+        if unknown:
+            return f"adapter {info.name!r} names unregistered skeleton(s) {unknown}; register them first."
+    return None
+
+
+def _call_isolated(impl, kwargs: dict, hook: str, *, expect: str | None = "AdapterInfo", quiet: bool = False):
+    """Call one hook implementation with the arguments it asks for; warn and return None if it raises."""
+    try:
+        result = impl.function(*(kwargs[a] for a in impl.argnames))
+    except Exception as e:  # noqa: BLE001
+        if not quiet:
+            _warn(f"motion-refiner plugin {impl.plugin_name!r}: {hook} raised {type(e).__name__}: {e}")
+        return None
+    if expect == "AdapterInfo":
+        from refiner.adapters.base import AdapterInfo
+
+        if not isinstance(result, AdapterInfo):
+            return None
+    return result
+
+
+def _load_entry_points(pm: PluginManager) -> None:
+    """pluggy's ``load_setuptools_entrypoints`` with each plugin isolated from the others."""
+    for dist in list(importlib.metadata.distributions()):
+        for ep in dist.entry_points:
+            if ep.group != ENTRY_POINT_GROUP or pm.get_plugin(ep.name) is not None or pm.is_blocked(ep.name):
+                continue
+            if ep.name in pm.sources:  # registered earlier, e.g. the same dist seen twice on sys.path
+                continue
+            source = f"{dist.metadata['Name']} {dist.version}"
+            _add_plugin(pm, ep.name, ep.load, source)
