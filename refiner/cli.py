@@ -61,9 +61,26 @@ def _bench_run(args: argparse.Namespace) -> int:
     return run_benchmarks(args.suite, data=args.data, out=args.out, quick=args.quick)
 
 
+def _adapters_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--no-autoload", action="store_true", help="only the built-in adapters (skip entry points)")
+
+
+def _adapters_run(args: argparse.Namespace) -> int:
+    from refiner.plugins.manager import get_plugin_manager
+
+    infos = get_plugin_manager(autoload=not args.no_autoload).adapters()
+    rows = [("adapter", "skeletons", "fps", "up", "from", "format")]
+    rows += [(i.name, ",".join(i.skeletons), f"{i.fps:g}", i.up, i.source, i.format) for i in infos.values()]
+    widths = [max(len(r[k]) for r in rows) for k in range(5)]
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r[:5], widths)) + "  " + r[5])
+    return 0
+
+
 COMMANDS: dict[str, tuple[str, Callable, Callable]] = {
     "concepts": ("learn motion concepts from a dataset", _concepts_arguments, _concepts_run),
     "bench": ("run benchmarks and print figures", _bench_arguments, _bench_run),
+    "adapters": ("list installed generator adapters", _adapters_arguments, _adapters_run),
 }
 
 
