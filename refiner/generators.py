@@ -206,7 +206,11 @@ def _default_refiner(skeleton: str):
             stacklevel=3,
         )
         return identity_refiner
-    return pretrained(skeleton)
+    try:
+        return pretrained(skeleton)
+    except ValueError as e:
+        raise ValueError(f"the default refiner Refiner.pretrained({skeleton!r}) failed: {e} Pass refiner=... "
+                         f"to choose one.") from e
 
 
 def _action_index(action: Any, skeleton: str) -> int | None:

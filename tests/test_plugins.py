@@ -1,0 +1,259 @@
+"""The plugin machinery: hook specs, built-in adapters as plugins, entry-point plugins, broken plugins."""
+from __future__ import annotations
+
+import inspect
+import sys
+import textwrap
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pluggy
+import pytest
+
+from refiner.adapters import BUILTIN_ADAPTERS
+from refiner.adapters.base import AdapterInfo
+from refiner.plugins import get_plugin_manager, hookimpl, hookspecs
+from refiner.plugins.manager import DISABLE_AUTOLOAD_ENV, AdapterPluginWarning, get_adapter, list_adapters
+from refiner.skeletons import list_skeletons
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "third_party_adapter"
+HOOKS = ("refiner_adapter_info", "refiner_convert_output", "refiner_recognize_generator", "refiner_sample_generator")
+
+
+def make_distribution(root: Path, name: str, entry_points: dict[str, str], modules: dict[str, str] | None = None):
+    """An installed-looking distribution: ``<name>-0.1.0.dist-info`` with entry points, plus module files."""
+    info = root / f"{name.replace('-', '_')}-0.1.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1.0\n")
+    lines = "\n".join(f"{k} = {v}" for k, v in entry_points.items())
+    (info / "entry_points.txt").write_text(f"[motion_refiner.adapters]\n{lines}\n")
+    for mod, src in (modules or {}).items():
+        (root / f"{mod}.py").write_text(textwrap.dedent(src))
+
+
+@pytest.fixture
+def example_installed(tmp_path, monkeypatch):
+    """The example plugin package visible to importlib.metadata, as ``pip install`` would make it."""
+    monkeypatch.delenv(DISABLE_AUTOLOAD_ENV, raising=False)
+    make_distribution(tmp_path, "motion-refiner-toymotion", {"toymotion": "toymotion_adapter"})
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.syspath_prepend(str(EXAMPLE))
+    yield tmp_path
+    sys.modules.pop("toymotion_adapter", None)
+
+
+def test_builtins_registered_under_their_names(pm):
+    assert set(BUILTIN_ADAPTERS) <= {name for name, _ in pm.list_name_plugin()}
+    assert list(pm.adapters()) == sorted(BUILTIN_ADAPTERS)
+    assert all(pm.sources[name] == "built-in" for name in BUILTIN_ADAPTERS)
+    pm.check_pending()
+
+
+@pytest.mark.parametrize("name", BUILTIN_ADAPTERS)
+def test_builtin_adapter_info_is_valid(pm, name):
+    info = pm.get_adapter(name)
+    assert isinstance(info, AdapterInfo) and info.name == name
+    assert set(info.skeletons) <= set(list_skeletons()) and info.skeletons[0] == "humanact12"
+    assert info.fps == 20.0 and info.up in {"-y", "+y"} and len(info.format) > 20
+    plugin = pm.get_plugin(name)
+    assert plugin.__name__ == f"refiner.adapters.{name}"
+    assert hasattr(plugin, "refiner_convert_output")
+
+
+def test_hookspecs_are_documented_contracts():
+    for name in HOOKS:
+        spec = getattr(hookspecs, name)
+        doc = " ".join(inspect.getdoc(spec).split())
+        assert "Called by" in doc and "Returns" in doc, name
+        first = getattr(spec, "motion_refiner_spec")["firstresult"]
+        assert ("Stops at the first non-None result" in doc) == first, name
+        if not first:
+            assert "collected" in doc
+    assert hookspecs.hookspec.project_name == hookimpl.project_name == "motion_refiner"
+
+
+def test_get_adapter_unknown_name_lists_known(pm):
+    with pytest.raises(ValueError, match=r"unknown adapter 'nope'; known adapters: action2motion, actor, mld"):
+        pm.get_adapter("nope")
+    with pytest.raises(ValueError, match="unknown adapter 'nope'"):
+        get_adapter("nope", pm)
+    with pytest.raises(ValueError, match="unknown adapter"):
+        pm.convert("nope", np.zeros((2, 60, 72)))
+    with pytest.raises(ValueError, match="cannot produce skeleton 'cmu_mocap'"):
+        pm.convert("action2motion", np.zeros((2, 60, 72)), skeleton="cmu_mocap", options={"representation": "xyz"})
+    assert [i.name for i in list_adapters(pm)] == sorted(BUILTIN_ADAPTERS)
+
+
+def test_adapter_info_validation():
+    ok = AdapterInfo("x_1", "fmt", ("humanact12",))
+    assert ok.skeletons == ("humanact12",) and ok.fps == 20.0
+    assert AdapterInfo("x", "fmt", "uestc").skeletons == ("uestc",)
+    for kwargs, match in [
+        (dict(name="Bad Name", format="f", skeletons=("humanact12",)), "lower-case identifier"),
+        (dict(name="x", format=" ", skeletons=("humanact12",)), "format"),
+        (dict(name="x", format="f", skeletons=()), "skeletons"),
+        (dict(name="x", format="f", skeletons=("humanact12",), fps=0), "fps"),
+        (dict(name="x", format="f", skeletons=("humanact12",), up="y"), "up"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            AdapterInfo(**kwargs)
+
+
+def test_entry_point_plugin_is_found_and_used(example_installed):
+    from refiner import RefinedGenerator
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", AdapterPluginWarning)  # built-ins listed as entry points too: no noise
+        pm = get_plugin_manager()
+    assert pm.sources["toymotion"] == "motion-refiner-toymotion 0.1.0"
+    assert pm.get_adapter("toymotion").source == "motion-refiner-toymotion 0.1.0"
+    assert set(BUILTIN_ADAPTERS) < set(pm.adapters())
+    import toymotion_adapter
+
+    generator = toymotion_adapter.ToyMotionGenerator()
+    gen = RefinedGenerator(generator, refiner=lambda m: m, plugin_manager=pm)  # recognised, not named
+    assert gen.adapter == "toymotion"
+    motions, raw = gen.sample(2, n=3, return_raw=True, random_state=0)
+    assert raw.shape == (3, 60, 24, 3) and len(motions) == 3
+    for m, r in zip(motions, raw):
+        expected = (r / 100.0) * np.array([1.0, -1.0, -1.0])
+        np.testing.assert_allclose(m.joints, expected - expected[:1, :1], atol=1e-6)
+        assert m.action == 2 and (m.joints[:, 15, 1] < m.joints[:, 0, 1]).all()  # y down
+    # the default plugin manager of RefinedGenerator also sees it
+    assert RefinedGenerator(generator, refiner=lambda m: m).adapter == "toymotion"
+
+
+def test_autoload_switches(example_installed, monkeypatch):
+    assert "toymotion" not in get_plugin_manager(autoload=False).adapters()
+    monkeypatch.setenv(DISABLE_AUTOLOAD_ENV, "1")
+    assert "toymotion" not in get_plugin_manager().adapters()
+    monkeypatch.delenv(DISABLE_AUTOLOAD_ENV)
+    assert "toymotion" in get_plugin_manager().adapters()
+
+
+BROKEN_MODULES = {
+    "mr_raising_adapter": """
+        from refiner.plugins import hookimpl
+        @hookimpl
+        def refiner_adapter_info():
+            raise RuntimeError("boom")
+    """,
+    "mr_typo_adapter": """
+        from refiner.plugins import hookimpl
+        @hookimpl
+        def refiner_adaptor_info():
+            return None
+    """,
+    "mr_badarg_adapter": """
+        from refiner.plugins import hookimpl
+        @hookimpl
+        def refiner_convert_output(adapter, output, colour):
+            return None
+    """,
+    "mr_duplicate_adapter": """
+        from refiner.adapters.base import AdapterInfo
+        from refiner.plugins import hookimpl
+        @hookimpl
+        def refiner_adapter_info():
+            return AdapterInfo("actor", "a second 'actor'", ("humanact12",))
+    """,
+    "mr_noinfo_adapter": """
+        from refiner.plugins import hookimpl
+        @hookimpl
+        def refiner_adapter_info():
+            return {"name": "dict"}
+    """,
+    "mr_import_error_adapter": """
+        raise ImportError("missing dependency xyz")
+    """,
+    "mr_bad_recognizer": """
+        from refiner.plugins import hookimpl
+        @hookimpl(tryfirst=True)
+        def refiner_recognize_generator(generator):
+            raise RuntimeError("cannot look at this")
+    """,
+}
+
+
+def test_broken_plugins_warn_and_others_keep_working(example_installed, tmp_path, monkeypatch):
+    """Each broken plugin is skipped with a warning naming it; the built-ins and the example still work."""
+    broken_root = tmp_path / "broken"
+    entry_points = {f"bad_{k}": k for k in BROKEN_MODULES}
+    entry_points["bad_missing"] = "mr_no_such_module_anywhere"
+    make_distribution(broken_root, "broken-plugins", entry_points, BROKEN_MODULES)
+    monkeypatch.syspath_prepend(str(broken_root))
+    try:
+        with pytest.warns(AdapterPluginWarning) as record:
+            pm = get_plugin_manager()
+        messages = "\n".join(str(w.message) for w in record)
+        for name, reason in [
+            ("bad_mr_raising_adapter", "raised RuntimeError: boom"),
+            ("bad_mr_typo_adapter", "'refiner_adaptor_info' is not a motion-refiner hook"),
+            ("bad_mr_badarg_adapter", "could not be registered"),
+            ("bad_mr_duplicate_adapter", "adapter name 'actor' is already taken"),
+            ("bad_mr_noinfo_adapter", "must return an AdapterInfo"),
+            ("bad_mr_import_error_adapter", "failed to import"),
+            ("bad_missing", "failed to import"),
+        ]:
+            assert f"'{name}' (broken-plugins 0.1.0)" in messages and reason in messages, (name, reason)
+        assert sorted(pm.adapters()) == sorted([*BUILTIN_ADAPTERS, "toymotion"])
+        assert pm.get_plugin("bad_mr_raising_adapter") is None  # unregistered again
+        assert pm.get_adapter("actor").source == "built-in"
+        # the recogniser that raises is reported at call time and the next plugin answers
+        import toymotion_adapter
+
+        with pytest.warns(AdapterPluginWarning, match="bad_mr_bad_recognizer.*cannot look at this"):
+            assert pm.recognize(toymotion_adapter.ToyMotionGenerator()) == "toymotion"
+        motions = pm.convert("toymotion", toymotion_adapter.ToyMotionGenerator().sample(0, n=1))
+        assert motions[0].joints.shape == (60, 24, 3)
+    finally:
+        for mod in BROKEN_MODULES:
+            sys.modules.pop(mod, None)
+
+
+def test_plugins_registered_by_hand(pm):
+    class Plugin:
+        @hookimpl
+        def refiner_adapter_info(self):
+            return AdapterInfo("handmade", "joints (T, 24, 3) metres", ("humanact12",))
+
+        @hookimpl
+        def refiner_convert_output(self, adapter, output):
+            if adapter != "handmade":
+                return None
+            from refiner.motion import Motion
+
+            return [Motion(output)]
+
+    pm.register(Plugin(), name="handmade")
+    assert pm.get_adapter("handmade").source == "registered"
+    out = pm.convert("handmade", np.zeros((5, 24, 3)))
+    assert out[0].n_frames == 5
+    with pytest.raises(pluggy.PluginValidationError):
+        class Bad:
+            @hookimpl
+            def refiner_recognize_generator(self, generator, extra):
+                return None
+
+        pm.register(Bad(), name="bad")
+
+
+def test_adapters_command_lists_installed_adapters(capsys):
+    from refiner.cli import main
+
+    assert main(["adapters", "--no-autoload"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].split()[:5] == ["adapter", "skeletons", "fps", "up", "from"]
+    rows = {line.split()[0]: line.split() for line in out[1:]}
+    assert set(rows) == set(BUILTIN_ADAPTERS)
+    assert rows["motiondiffuse"][1:5] == ["humanact12,uestc", "20", "+y", "built-in"]
+    assert "Lie VAE" in " ".join(rows["action2motion"])
+
+
+def test_adapters_command_shows_where_plugins_come_from(example_installed, capsys):
+    from refiner.cli import main
+
+    assert main(["adapters"]) == 0
+    line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("toymotion"))
+    assert "motion-refiner-toymotion 0.1.0" in line and "centimetres" in line
