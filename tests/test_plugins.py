@@ -257,3 +257,22 @@ def test_adapters_command_shows_where_plugins_come_from(example_installed, capsy
     assert main(["adapters"]) == 0
     line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("toymotion"))
     assert "motion-refiner-toymotion 0.1.0" in line and "centimetres" in line
+
+
+def test_broken_builtin_is_skipped_with_a_warning(monkeypatch):
+    import refiner.adapters
+
+    monkeypatch.setattr(refiner.adapters, "BUILTIN_ADAPTERS", ("action2motion", "no_such_builtin"))
+    with pytest.warns(AdapterPluginWarning, match="'no_such_builtin' \\(built-in\\) failed to import"):
+        pm = get_plugin_manager(autoload=False)
+    assert list(pm.adapters()) == ["action2motion"]
+
+
+def test_import_refiner_stays_cheap():
+    """`import refiner` must not import the adapters, the plugin manager or smplx."""
+    import subprocess
+
+    code = ("import sys, refiner; bad = [m for m in sys.modules if m.startswith(('refiner.adapters', "
+            "'refiner.plugins', 'smplx', 'pluggy'))]; print(bad)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
