@@ -46,6 +46,39 @@ def _concepts_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dataset", default="humanact12", choices=["humanact12"])
+    p.add_argument("--data", type=Path, default=None, help="dataset file or folder (default: ../shared/data/...)")
+    p.add_argument("--split", default="all", choices=["all", "train"], help="all subjects, or 1-10 for benchmarks")
+    p.add_argument("--out", type=Path, required=True, help="folder for the trained refiner (rerun to resume)")
+    p.add_argument("--config", default="default", choices=["default", "tiny"])
+    p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu, cuda, ...")
+    p.add_argument("--max-seconds", type=float, default=None, help="time limit per module")
+    p.add_argument("--only", default=None, help="train just this part (for parallel runs); rerun without to assemble")
+    p.add_argument("--seed", type=int, default=0)
+
+
+def _train_run(args: argparse.Namespace) -> int:
+    import logging
+
+    from refiner.datasets import load_dataset
+    from refiner.trainer import train_refiner
+
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    dataset = load_dataset(args.dataset, args.data)
+    refiner = train_refiner(dataset, args.out, split=args.split, config=args.config, device=args.device,
+                            random_state=args.seed, progress=True, max_seconds=args.max_seconds, only=args.only)
+    if refiner is None:
+        print(f"trained part {args.only!r} into {args.out / 'parts'}")
+        return 0
+    counts = refiner.n_parameters()
+    print(f"trained on {refiner.manifest['clips']} clips ({args.split}); parameters: "
+          + ", ".join(f"{k}={v:,}" for k, v in counts.items()))
+    print(f"seconds per module: {refiner.manifest['train_seconds']}")
+    print(f"written to {args.out}")
+    return 0
+
+
 def _bench_arguments(p: argparse.ArgumentParser) -> None:
     from refiner.bench import SUITES
 
@@ -79,6 +112,7 @@ def _adapters_run(args: argparse.Namespace) -> int:
 
 COMMANDS: dict[str, tuple[str, Callable, Callable]] = {
     "concepts": ("learn motion concepts from a dataset", _concepts_arguments, _concepts_run),
+    "train": ("train the refiner's networks on a dataset", _train_arguments, _train_run),
     "bench": ("run benchmarks and print figures", _bench_arguments, _bench_run),
     "adapters": ("list installed generator adapters", _adapters_arguments, _adapters_run),
 }

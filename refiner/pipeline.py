@@ -1,0 +1,379 @@
+"""The three-step refiner (paper §3.2) behind ``refine()``: recognise, refine anchors, refine transitions.
+
+Do no harm: only flagged anchors and flagged transitions change. Every change is spliced in as a
+displacement that is zero at the kept frames on both sides and tapered with a smoothstep, so
+position *and* velocity are continuous where refined frames meet kept ones; changed frames are then
+put back on the input's bone lengths.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from refiner.anchor_refinement import AnchorRefiner, masked_window
+from refiner.anchors import AnchorConcepts
+from refiner.motion import Motion
+from refiner.recognition import AnchorRecognizer
+from refiner.skeletons import get_skeleton
+from refiner.transition_refinement import TransitionRefiner
+from refiner.transitions import TransitionGenerator
+from refiner.validation import check_action, check_joints
+
+__all__ = ["Refiner", "RefinementReport", "refine", "MODES", "splice", "project_bone_lengths"]
+
+MODES = ("full", "anchor", "transition")
+_PARTS = {
+    "recognizer": AnchorRecognizer,
+    "anchor_refiner": AnchorRefiner,
+    "transition_generator": TransitionGenerator,
+    "transition_refiner": TransitionRefiner,
+    "anchor_concepts": AnchorConcepts,
+}
+_WEIGHTS = Path(__file__).resolve().parent / "weights"
+#: Shortest clip refined; shorter ones pass through unchanged (reported).
+MIN_FRAMES = 8
+
+
+@dataclass
+class RefinementReport:
+    """What ``refine`` found and changed in one clip (JSON-serialisable via :meth:`to_dict`)."""
+
+    mode: str
+    n_frames: int
+    action: int | None = None
+    action_name: str | None = None
+    action_inferred: bool = False
+    anchors: list[int] = field(default_factory=list)
+    anchor_scores: list[float] = field(default_factory=list)
+    threshold: float | None = None
+    flagged_anchors: list[int] = field(default_factory=list)
+    refined_anchors: list[dict] = field(default_factory=list)
+    transition_residuals_cm: list[float] = field(default_factory=list)
+    transition_threshold_cm: float | None = None
+    flagged_transitions: list[list[int]] = field(default_factory=list)
+    changes: list[dict] = field(default_factory=list)
+    note: str = ""
+
+    @property
+    def changed_frames(self) -> np.ndarray:
+        """Boolean ``(T,)`` mask of frames that changed."""
+        mask = np.zeros(self.n_frames, dtype=bool)
+        for c in self.changes:
+            mask[c["start"] : c["stop"]] = True
+        return mask
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def smoothstep(n: int) -> np.ndarray:
+    """``n`` weights rising 0 -> 1 with zero slope at both ends (excluding the ends themselves)."""
+    t = np.arange(1, n + 1) / (n + 1)
+    return t * t * (3 - 2 * t)
+
+
+def splice(original: np.ndarray, proposal: np.ndarray, lo: int, hi: int, *, blend: int = 4,
+           keep_start: bool = True, keep_end: bool = True) -> np.ndarray:
+    """Replace frames ``lo..hi-1`` of ``original`` by ``proposal`` without jumps.
+
+    The displacement ``proposal - original`` is corrected linearly so it is zero at the kept
+    frames ``lo - 1`` and ``hi`` (when ``keep_start`` / ``keep_end``), then tapered over ``blend``
+    frames at each kept side, so position and velocity are continuous there.
+
+    Parameters
+    ----------
+    original, proposal : ndarray (T, J, 3)
+    lo, hi : int
+        Changed frames ``lo <= t < hi``.
+    """
+    out = original.copy()
+    a, b = (lo - 1 if keep_start else lo), (hi if keep_end else hi - 1)
+    a, b = max(a, 0), min(b, len(original) - 1)
+    disp = (proposal[a : b + 1] - original[a : b + 1]).astype(np.float64)
+    n = len(disp)
+    tau = np.linspace(0.0, 1.0, n)[:, None, None]
+    start_fix = disp[0] if keep_start and lo > 0 else 0.0
+    end_fix = disp[-1] if keep_end and hi < len(original) else 0.0
+    disp = disp - (1 - tau) * start_fix - tau * end_fix
+    w = np.ones(n)
+    m = min(blend, (n - 1) // 2)
+    if keep_start and lo > 0 and m > 0:
+        w[1 : m + 1] = np.minimum(w[1 : m + 1], smoothstep(m))
+        w[0] = 0.0
+    if keep_end and hi < len(original) and m > 0:
+        w[n - 1 - m : n - 1] = np.minimum(w[n - 1 - m : n - 1], smoothstep(m)[::-1])
+        w[-1] = 0.0
+    out[a : b + 1] = original[a : b + 1] + (w[:, None, None] * disp).astype(original.dtype)
+    return out
+
+
+def project_bone_lengths(joints: np.ndarray, reference: np.ndarray, frames: np.ndarray, parents) -> np.ndarray:
+    """Put ``frames`` of ``joints`` back on the bone lengths of ``reference`` (same shape), root kept.
+
+    Bone directions are kept; lengths are taken from the same frame of ``reference``.
+    """
+    out = joints.copy()
+    for t in np.flatnonzero(frames):
+        for j, p in enumerate(parents):
+            if p < 0:
+                continue
+            length = np.linalg.norm(reference[t, j] - reference[t, p])
+            v = joints[t, j] - joints[t, p]
+            norm = np.linalg.norm(v)
+            direction = v / norm if norm > 1e-9 else reference[t, j] - reference[t, p]
+            out[t, j] = out[t, p] + direction * (length / max(np.linalg.norm(direction), 1e-9))
+    return out
+
+
+class Refiner:
+    """The fitted three-step refiner for one skeleton.
+
+    Parameters
+    ----------
+    recognizer : AnchorRecognizer
+    anchor_refiner : AnchorRefiner
+    transition_generator : TransitionGenerator
+    transition_refiner : TransitionRefiner
+    anchor_concepts : AnchorConcepts
+    skeleton : str, default="humanact12"
+    action_names : sequence of str
+    mode : {"full", "anchor", "transition"}, default="full"
+    blend : int, default=4
+        Frames over which a change is tapered in at each kept side.
+    manifest : dict, optional
+        Provenance of the weights (dataset, split, licence, hashes).
+    """
+
+    def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts, *,
+                 skeleton: str = "humanact12", action_names=(), mode: str = "full", blend: int = 4,
+                 manifest: dict | None = None):
+        self.recognizer = recognizer
+        self.anchor_refiner = anchor_refiner
+        self.transition_generator = transition_generator
+        self.transition_refiner = transition_refiner
+        self.anchor_concepts = anchor_concepts
+        self.skeleton = get_skeleton(skeleton).name
+        self.action_names = tuple(action_names)
+        self.mode = _check_mode(mode)
+        self.blend = blend
+        self.manifest = manifest or {}
+
+    # ------------------------------------------------------------------ persistence
+
+    def save(self, folder: str | os.PathLike, *, half: bool = False) -> None:
+        """Write every part as safetensors plus ``manifest.json`` (``half`` stores float16 weights)."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        files = {}
+        for name in _PARTS:
+            path = folder / f"{name}.safetensors"
+            part = getattr(self, name)
+            part.save(path, half=half) if name != "anchor_concepts" else part.save(path)
+            files[name] = {"file": path.name, "sha256": _sha256(path)}
+        manifest = {**self.manifest, "skeleton": self.skeleton, "action_names": list(self.action_names),
+                    "files": files}
+        (folder / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+
+    @classmethod
+    def load(cls, folder: str | os.PathLike, *, device: str = "cpu", verify: bool = True, **kwargs) -> "Refiner":
+        """Load a saved refiner, checking every file against the manifest's sha256."""
+        folder = Path(folder)
+        manifest_path = folder / "manifest.json"
+        if not manifest_path.is_file():
+            raise ValueError(f"no refiner at {str(folder)!r}: manifest.json is missing.")
+        manifest = json.loads(manifest_path.read_text())
+        parts = {}
+        for name, part_cls in _PARTS.items():
+            entry = manifest["files"][name]
+            path = folder / entry["file"]
+            if verify and _sha256(path) != entry["sha256"]:
+                raise ValueError(f"{str(path)!r} does not match the sha256 in {str(manifest_path)!r}; "
+                                 "the weights are corrupt or were replaced.")
+            parts[name] = part_cls.load(path) if name == "anchor_concepts" else part_cls.load(path, device=device)
+        return cls(**parts, skeleton=manifest["skeleton"], action_names=manifest["action_names"],
+                   manifest=manifest, **kwargs)
+
+    @classmethod
+    def pretrained(cls, skeleton: str = "humanact12", *, split: str = "all", device: str = "cpu", **kwargs) -> "Refiner":
+        """The shipped weights: ``split="all"`` (default, all subjects) or ``"train"`` (subjects 1-10, for benchmarks).
+
+        Weights are loaded on first use and verified against their manifest. They were trained on
+        HumanAct12, which is for academic, non-commercial use only; so are they.
+        """
+        name = f"{get_skeleton(skeleton).name}" + ("" if split == "all" else f"-{split}")
+        folder = _WEIGHTS / name
+        if not (folder / "manifest.json").is_file():
+            known = sorted(p.name for p in _WEIGHTS.iterdir() if (p / "manifest.json").is_file()) if _WEIGHTS.is_dir() else []
+            raise ValueError(f"no shipped weights for skeleton {skeleton!r}, split {split!r}; shipped: {known or 'none'}.")
+        key = (name, device, tuple(sorted(kwargs.items())))
+        if key not in _PRETRAINED:
+            _PRETRAINED[key] = cls.load(folder, device=device, **kwargs)
+        return _PRETRAINED[key]
+
+    def n_parameters(self) -> dict:
+        counts = {name: getattr(self, name).n_parameters() for name in _PARTS if name != "anchor_concepts"}
+        counts["total"] = sum(counts.values())
+        return counts
+
+    # ------------------------------------------------------------------ refinement
+
+    def refine(self, seq, *, action=None, mode: str | None = None, return_report: bool = False):
+        """Refine one clip or a batch; returns the same kind as given (see :func:`refine`)."""
+        mode = _check_mode(mode or self.mode)
+        skel = get_skeleton(self.skeleton)
+        if isinstance(seq, Motion):
+            if seq.skeleton != self.skeleton:
+                raise ValueError(f"this refiner is for skeleton {self.skeleton!r}; got a {seq.skeleton!r} motion.")
+            act = seq.action if action is None else action
+            out, report = self._refine_clip(seq.joints, act, mode)
+            result = seq.with_joints(out)
+            if result.action is None and report.action is not None:
+                result = Motion(out, skeleton=seq.skeleton, fps=seq.fps, action=report.action)
+            return (result, report) if return_report else result
+        is_torch = hasattr(seq, "detach")
+        ndim = len(getattr(seq, "shape", np.shape(seq)))
+        batched = ndim == 4
+        x = check_joints(seq, skeleton=skel, batched=batched)
+        clips = x if batched else x[None]
+        actions = action if (batched and isinstance(action, (list, tuple, np.ndarray))) else [action] * len(clips)
+        if len(actions) != len(clips):
+            raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
+        outs, reports = [], []
+        for i, (clip, act) in enumerate(zip(clips, actions)):
+            try:
+                o, r = self._refine_clip(clip, act, mode)
+            except ValueError as e:
+                raise ValueError(f"clip {i} of {len(clips)}: {e}") from e if batched else e
+            outs.append(o)
+            reports.append(r)
+        out = np.stack(outs) if batched else outs[0]
+        if is_torch:
+            import torch
+
+            out = torch.as_tensor(out, dtype=seq.dtype, device=seq.device)
+        if return_report:
+            return out, (reports if batched else reports[0])
+        return out
+
+    def _refine_clip(self, joints: np.ndarray, action, mode: str) -> tuple[np.ndarray, RefinementReport]:
+        x = np.array(joints, dtype=np.float32, copy=True)
+        report = RefinementReport(mode=mode, n_frames=len(x))
+        if action is not None:
+            report.action = check_action(action, self.action_names)
+        if len(x) < MIN_FRAMES:
+            report.note = f"clip has {len(x)} frames; at least {MIN_FRAMES} are needed to refine, returned unchanged"
+            return x, report
+        rec = self.recognizer.recognize(x)
+        if report.action is None:
+            report.action, report.action_inferred = int(np.argmax(rec.action_probability)), True
+        report.action_name = self.action_names[report.action] if self.action_names else None
+        anchors = rec.anchors
+        report.anchors = anchors.tolist()
+        report.anchor_scores = [round(float(s), 3) for s in rec.scores]
+        report.threshold = round(float(rec.threshold), 3)
+        report.flagged_anchors = rec.flagged_anchors.tolist()
+        y = x.copy()
+        changed = np.zeros(len(x), dtype=bool)
+        touched_transitions: set[int] = set()
+        if mode in ("full", "anchor"):
+            for k in np.flatnonzero(rec.flagged):
+                y = self._refine_anchor(y, anchors, int(k), report, changed)
+                touched_transitions.update({int(k) - 1, int(k)} & set(range(len(anchors) - 1)))
+        if mode in ("full", "transition"):
+            refined, residuals = self.transition_refiner.refine_transitions(y, anchors)
+            report.transition_residuals_cm = [round(100 * float(r), 3) for r in residuals]
+            report.transition_threshold_cm = round(100 * float(self.transition_refiner.threshold_), 3)
+            flagged = set(np.flatnonzero(residuals > self.transition_refiner.threshold_).tolist())
+            if mode == "full":
+                flagged |= touched_transitions
+            for m in sorted(flagged):
+                lo, hi = int(anchors[m]) + 1, int(anchors[m + 1])
+                if hi <= lo:
+                    continue
+                why = ("after anchor refinement" if m in touched_transitions
+                       else f"residual {100 * residuals[m]:.2f} cm > {report.transition_threshold_cm:.2f} cm")
+                y = splice(y, refined, lo, hi, blend=self.blend)
+                changed[lo:hi] = True
+                report.flagged_transitions.append([int(anchors[m]), int(anchors[m + 1])])
+                report.changes.append({"start": lo, "stop": hi, "step": "transition", "reason": why})
+        if changed.any():
+            y = project_bone_lengths(y, x, changed, get_skeleton(self.skeleton).parents)
+        return y, report
+
+    def _refine_anchor(self, y, anchors, k, report, changed) -> np.ndarray:
+        frame = int(anchors[k])
+        pose, concept = self.anchor_refiner.refine_anchor(y, anchors, k, report.action)
+        proposal = y.copy()
+        proposal[frame] = pose
+        starts, ends, durations = [], [], []
+        if k > 0:
+            starts.append(y[anchors[k - 1]]), ends.append(pose), durations.append(frame - int(anchors[k - 1]))
+        if k + 1 < len(anchors):
+            starts.append(pose), ends.append(y[anchors[k + 1]]), durations.append(int(anchors[k + 1]) - frame)
+        pieces = self.transition_generator.generate(np.stack(starts), np.stack(ends), np.array(durations))
+        p = 0
+        if k > 0:
+            proposal[anchors[k - 1] : frame + 1] = pieces[p]
+            p += 1
+        if k + 1 < len(anchors):
+            proposal[frame : anchors[k + 1] + 1] = pieces[p]
+        lo, hi = masked_window(len(y), anchors, k)
+        moved_cm = 100 * float(np.linalg.norm(pose - y[frame], axis=-1).mean())
+        y = splice(y, proposal, lo, hi, blend=self.blend, keep_start=k > 0, keep_end=k + 1 < len(anchors))
+        changed[lo:hi] = True
+        report.refined_anchors.append({"frame": frame, "concept": int(concept), "moved_cm": round(moved_cm, 3)})
+        report.changes.append({"start": lo, "stop": hi, "step": "anchor",
+                               "reason": f"anchor {frame} scored below the threshold; replaced by concept {concept}"})
+        return y
+
+
+_PRETRAINED: dict = {}
+
+
+def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full", return_report: bool = False,
+           refiner: Refiner | None = None):
+    """Refine a motion with the shipped concepts and networks.
+
+    Parameters
+    ----------
+    seq : Motion, or array-like of shape (T, J, 3) or (B, T, J, 3) (numpy or torch)
+        Joint positions in metres in the skeleton's canonical frame (HumanAct12: y down, facing -z).
+    skeleton : str, default="humanact12"
+    action : int, str or None
+        Action index or name (per clip for a batch); inferred by anchor recognition when None.
+    mode : {"full", "anchor", "transition"}, default="full"
+        Which refinement steps run after recognition.
+    return_report : bool, default=False
+        Also return a :class:`RefinementReport` (a list of them for a batch).
+    refiner : Refiner, optional
+        Use this refiner instead of the shipped one.
+
+    Returns
+    -------
+    The same kind as ``seq`` (Motion, numpy array or torch tensor), refined; frames that were not
+    flagged are returned exactly as given. The input is never modified.
+
+    Examples
+    --------
+    >>> import numpy as np, refiner
+    >>> from refiner.datasets import load_humanact12
+    >>> clip = load_humanact12()[0]                            # doctest: +SKIP
+    >>> out, report = refiner.refine(clip, return_report=True)  # doctest: +SKIP
+    """
+    model = refiner if refiner is not None else Refiner.pretrained(skeleton)
+    return model.refine(seq, action=action, mode=mode, return_report=return_report)
+
+
+def _check_mode(mode: str) -> str:
+    if mode not in MODES:
+        raise ValueError(f"unknown mode {mode!r}; known: {', '.join(MODES)}.")
+    return mode
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()

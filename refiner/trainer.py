@@ -1,0 +1,129 @@
+"""Train the whole refiner on a dataset, module by module (appendix E.2), resumable per module."""
+from __future__ import annotations
+
+import logging
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+from refiner.anchor_refinement import AnchorRefiner
+from refiner.anchors import AnchorConcepts
+from refiner.concepts import learn_concepts
+from refiner.datasets import MotionDataset
+from refiner.pipeline import Refiner
+from refiner.recognition import AnchorRecognizer
+from refiner.transition_refinement import TransitionRefiner
+from refiner.transitions import TransitionGenerator
+
+__all__ = ["CONFIGS", "train_refiner"]
+
+log = logging.getLogger(__name__)
+
+#: Network sizes and schedules. "default" is the paper's (appendix A) with early stopping;
+#: "tiny" trains in seconds on a CPU for tests.
+CONFIGS = {
+    "default": {
+        "encoder": dict(d_model=128, n_layers=2, n_heads=4, ffn_dim=128),
+        "schedule": dict(n_epochs=600, patience=40, batch_size=128),
+        "cvae": dict(latent_dim=32, hidden=256),
+        "n_clusters": 8,
+    },
+    "tiny": {
+        "encoder": dict(d_model=32, n_layers=1, n_heads=2, ffn_dim=32),
+        "schedule": dict(n_epochs=3, patience=3, batch_size=16, steps_per_epoch=2),
+        "cvae": dict(latent_dim=4, hidden=32),
+        "n_clusters": 2,
+    },
+}
+
+LICENCE = ("Trained on HumanAct12 (derived from PHSPD): academic, non-commercial use only. "
+           "Cite Action2Motion (Guo et al. 2020) and PHSPD (Zou et al. 2020).")
+
+
+def train_refiner(
+    dataset: MotionDataset,
+    out: str | Path,
+    *,
+    split: str = "all",
+    config: str = "default",
+    device: str = "auto",
+    random_state: int = 0,
+    progress: bool = False,
+    half: bool = True,
+    max_seconds: float | None = None,
+    only: str | None = None,
+) -> Refiner | None:
+    """Learn concepts and train the four networks; save the refiner to ``out``.
+
+    Each trained part is kept in ``out/parts/``; a rerun with the same ``out`` loads finished parts
+    instead of training them again. ``only`` trains that one part and returns None, so the parts
+    can train in parallel processes; a final run without it assembles them.
+    """
+    if only is not None and only not in _PART_NAMES:
+        raise ValueError(f"unknown part {only!r}; known: {', '.join(_PART_NAMES)}.")
+    if config not in CONFIGS:
+        raise ValueError(f"unknown config {config!r}; known: {', '.join(CONFIGS)}.")
+    cfg = CONFIGS[config]
+    out = Path(out)
+    parts_dir = out / "parts"
+    parts_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    concepts = learn_concepts(dataset, split=split, n_clusters=cfg["n_clusters"], random_state=random_state,
+                              progress=progress)
+    data = dataset.split(split)
+    clips = [m.joints for m in data]
+    actions = data.actions
+    from refiner.segmentation import segment
+
+    segs = [segment(c, penalty=concepts.config["penalty"]) for c in clips]
+    anchors = [s.anchors for s in segs]
+    common = dict(device=device, random_state=random_state, verbose=progress, max_seconds=max_seconds, **cfg["schedule"])
+    seconds = {}
+
+    def part(name, cls, train):
+        path = parts_dir / f"{name}.safetensors"
+        if only is not None and name not in (only, "anchor_concepts"):
+            return None
+        if path.is_file():
+            log.info("%s: loaded finished part %s", name, path)
+            return cls.load(path, device="cpu") if cls is not AnchorConcepts else cls.load(path)
+        t = time.perf_counter()
+        obj = train()
+        seconds[name] = round(time.perf_counter() - t, 1)
+        obj.save(path)
+        return obj.to("cpu") if hasattr(obj, "to") else obj
+
+    anchor_concepts = part("anchor_concepts", AnchorConcepts, lambda: concepts.anchor_concepts)
+    recognizer = part("recognizer", AnchorRecognizer, lambda: AnchorRecognizer(**cfg["encoder"], **common).fit(
+        clips, anchors, actions, n_actions=len(dataset.action_names)))
+    anchor_refiner = part("anchor_refiner", AnchorRefiner, lambda: AnchorRefiner(**cfg["encoder"], **common).fit(
+        clips, anchors, actions, anchor_concepts))
+    generator = part("transition_generator", TransitionGenerator, lambda: TransitionGenerator(**cfg["cvae"], **common).fit(
+        concepts.transitions))
+    transition_refiner = part("transition_refiner", TransitionRefiner, lambda: TransitionRefiner(**cfg["encoder"], **common).fit(
+        clips, anchors, [s.coeffs for s in segs]))
+    if only is not None:
+        return None
+    manifest = {
+        "dataset": dataset.name, "split": split, "config": config, "clips": len(clips),
+        "subjects": sorted(set(int(s) for s in data.subjects)), "penalty": concepts.config["penalty"],
+        "licence": LICENCE, "commit": _commit(), "train_seconds": seconds,
+        "total_seconds": round(time.perf_counter() - t0, 1),
+    }
+    refiner = Refiner(recognizer, anchor_refiner, generator, transition_refiner, anchor_concepts,
+                      skeleton=data.motions[0].skeleton, action_names=dataset.action_names, manifest=manifest)
+    refiner.save(out, half=half)
+    return refiner
+
+
+_PART_NAMES = ("anchor_concepts", "recognizer", "anchor_refiner", "transition_generator", "transition_refiner")
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              cwd=Path(__file__).parent, timeout=5).stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
