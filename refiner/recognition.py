@@ -220,18 +220,27 @@ class AnchorRecognizer(NetworkComponent):
         val_scores = self._score_features(self._anchor_features(validation[0], validation[1]))
         self.threshold_ = float(np.percentile(val_scores, self.flaw_percentile))
         if self.detect_threshold == "auto":
-            probs = [self._forward_clip(np.asarray(c, np.float32))[0] for c in validation[0]]
-            f1 = []
-            for th in _DETECT_CANDIDATES:
-                tp = n_pred = n_ref = 0
-                for p, a in zip(probs, validation[1]):
-                    counts = match_anchors(_peaks(p, th), a)
-                    tp, n_pred, n_ref = tp + counts[0], n_pred + counts[1], n_ref + counts[2]
-                f1.append(2 * tp / max(n_pred + n_ref, 1))
-            self.detect_threshold_ = float(_DETECT_CANDIDATES[int(np.argmax(f1))])
+            self.calibrate_detection(validation[0], validation[1])
         else:
             self.detect_threshold_ = float(self.detect_threshold)
         return self
+
+    def calibrate_detection(self, clips, anchors) -> dict[float, float]:
+        """Set ``detect_threshold_`` to the candidate with the best anchor F1 on these clips.
+
+        Returns the F1 (tolerance 2 frames) of every candidate threshold.
+        """
+        check_is_fitted(self, "network_", msg=NOT_FITTED)
+        probs = [self._forward_clip(np.asarray(c, np.float32))[0] for c in clips]
+        f1 = {}
+        for th in _DETECT_CANDIDATES:
+            tp = n_pred = n_ref = 0
+            for p, a in zip(probs, anchors):
+                counts = match_anchors(_peaks(p, th), a)
+                tp, n_pred, n_ref = tp + counts[0], n_pred + counts[1], n_ref + counts[2]
+            f1[float(th)] = 2 * tp / max(n_pred + n_ref, 1)
+        self.detect_threshold_ = max(f1, key=f1.get)
+        return f1
 
     def _crops(self, clips, anchors, actions) -> ClipCrops:
         targets = [anchor_targets(len(c), a) for c, a in zip(clips, anchors)]

@@ -1,0 +1,104 @@
+"""The learned-component contract (sklearn style) for every network component, plus their maths."""
+import numpy as np
+import pytest
+from sklearn.mixture import GaussianMixture
+
+from refiner.anchor_refinement import AnchorRefiner
+from refiner.anchors import AnchorConcepts
+from refiner.recognition import AnchorRecognizer, anchor_targets, gmm_log_likelihood, match_anchors
+from refiner.transition_refinement import TransitionRefiner, transition_layout
+from refiner.transitions import TransitionGenerator, collect_transitions
+from refiner.segmentation import segment
+from refiner.validation import NotFittedError
+
+TINY = dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16, n_epochs=2, steps_per_epoch=1, batch_size=8, device="cpu")
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    r = np.random.default_rng(3)
+    clips = [np.cumsum(r.normal(scale=0.02, size=(int(r.integers(30, 50)), 24, 3)), axis=0).astype(np.float32)
+             for _ in range(10)]
+    segs = [segment(c, penalty=20.0) for c in clips]
+    actions = np.array([i % 2 for i in range(10)])
+    poses = np.concatenate([c[s.anchors] for c, s in zip(clips, segs)])
+    acts = np.concatenate([np.full(len(s.anchors), a) for s, a in zip(segs, actions)])
+    concepts = AnchorConcepts(2).fit(poses, acts)
+    return clips, segs, actions, concepts
+
+
+def _fitted(name, data):
+    clips, segs, actions, concepts = data
+    anchors = [s.anchors for s in segs]
+    if name == "recognizer":
+        return AnchorRecognizer(crop_frames=20, **TINY).fit(clips, anchors, actions)
+    if name == "anchor_refiner":
+        return AnchorRefiner(crop_frames=20, **TINY).fit(clips, anchors, actions, concepts)
+    if name == "transition_refiner":
+        return TransitionRefiner(crop_frames=20, **TINY).fit(clips, anchors, [s.coeffs for s in segs])
+    return TransitionGenerator(4, hidden=16, n_epochs=2, steps_per_epoch=1, batch_size=8, device="cpu").fit(
+        collect_transitions(clips, segs, actions))
+
+
+CLASSES = {"recognizer": AnchorRecognizer, "anchor_refiner": AnchorRefiner,
+           "transition_refiner": TransitionRefiner, "transition_generator": TransitionGenerator}
+
+
+@pytest.mark.parametrize("name", list(CLASSES))
+def test_contract(name, synthetic, tmp_path):
+    cls = CLASSES[name]
+    fresh = cls()
+    assert not [k for k in vars(fresh) if k.endswith("_")]
+    assert cls(**fresh.get_params()).get_params() == fresh.get_params()
+    with pytest.raises(NotFittedError):
+        fresh.save(tmp_path / "x.safetensors")
+    clips = synthetic[0]
+    copies = [c.copy() for c in clips]
+    model = _fitted(name, synthetic)
+    for a, b in zip(clips, copies):
+        np.testing.assert_array_equal(a, b)
+    path = tmp_path / f"{name}.safetensors"
+    model.save(path)
+    back = cls.load(path)
+    assert back.get_params() == model.get_params()
+    for (k, v), (k2, v2) in zip(model.network_.state_dict().items(), back.network_.state_dict().items()):
+        assert k == k2
+        np.testing.assert_array_equal(v.numpy(), v2.numpy())
+    other = [c for c in CLASSES.values() if c is not cls][0]
+    with pytest.raises(ValueError, match="expected a"):
+        other.load(path)
+
+
+def test_outputs_survive_save_load(synthetic, tmp_path):
+    clips, segs, actions, _ = synthetic
+    rec = _fitted("recognizer", synthetic)
+    rec.save(tmp_path / "r.safetensors")
+    back = AnchorRecognizer.load(tmp_path / "r.safetensors")
+    a, b = rec.recognize(clips[0]), back.recognize(clips[0])
+    np.testing.assert_array_equal(a.anchors, b.anchors)
+    np.testing.assert_allclose(a.scores, b.scores, rtol=1e-6)
+    gen = _fitted("transition_generator", synthetic)
+    t = collect_transitions(clips, segs, actions)
+    frames = gen.generate(t.start[:4], t.end[:4], t.durations[:4])
+    for f, s, e, d in zip(frames, t.start, t.end, t.durations):
+        assert len(f) == d + 1
+        np.testing.assert_allclose(f[0], s, atol=1e-6)  # starts exactly at the start anchor
+        np.testing.assert_allclose(f[-1], e, atol=1e-6)  # and ends at the end anchor
+    with pytest.raises(ValueError, match="durations"):
+        gen.generate(t.start[:1], t.end[:1], [0])
+
+
+def test_gmm_log_likelihood_matches_sklearn(rng):
+    x = np.concatenate([rng.normal(size=(200, 5)), rng.normal(3, 0.5, size=(100, 5))])
+    gmm = GaussianMixture(2, random_state=0).fit(x)
+    np.testing.assert_allclose(gmm_log_likelihood(x, gmm.weights_, gmm.means_, gmm.covariances_),
+                               gmm.score_samples(x), rtol=1e-8)
+
+
+def test_anchor_targets_and_matching():
+    t = anchor_targets(10, [0, 5, 9])
+    assert t[5] == 1.0 and t[0] == 1.0 and abs(t[4] - np.exp(-0.5)) < 1e-6
+    assert match_anchors([0, 6, 12], [0, 5, 9]) == (2, 3, 3)
+    idx, tau, dur = transition_layout(10, [0, 4, 9])
+    assert idx.tolist() == [0, 0, 0, 0, 1, 1, 1, 1, 1, 1]
+    assert tau[4] == 0.0 and tau[9] == 1.0 and dur[0] == 4

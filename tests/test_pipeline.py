@@ -1,0 +1,139 @@
+"""The three-step refiner: a tiny pipeline trained on real clips, splicing, do-no-harm, input kinds, errors."""
+import numpy as np
+import pytest
+import torch
+
+from refiner import Motion
+from refiner.pipeline import Refiner, project_bone_lengths, refine, splice
+from refiner.skeletons import bone_lengths, get_skeleton
+
+pytestmark = pytest.mark.real_data
+
+
+@pytest.fixture(scope="session")
+def tiny_refiner(humanact12, tmp_path_factory):
+    """The whole pipeline trained with the tiny configuration on 24 real clips (2 per action)."""
+    from refiner.trainer import train_refiner
+
+    pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[:2]]
+    out = tmp_path_factory.mktemp("tiny_refiner")
+    refiner = train_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", half=False)
+    return refiner, out
+
+
+def test_tiny_pipeline_trains_and_refines(tiny_refiner, humanact12):
+    refiner, out = tiny_refiner
+    clip = humanact12[500]
+    before = clip.numpy()
+    result, report = refiner.refine(clip, return_report=True)
+    assert isinstance(result, Motion) and result.joints.shape == clip.joints.shape
+    np.testing.assert_array_equal(clip.joints, before)
+    assert report.anchors[0] == 0 and report.anchors[-1] == clip.n_frames - 1
+    assert len(report.anchor_scores) == len(report.anchors)
+    changed = report.changed_frames
+    np.testing.assert_array_equal(result.joints[~changed], clip.joints[~changed])  # do no harm
+    # reloading the saved refiner gives the same refinement
+    again = Refiner.load(out).refine(clip)
+    np.testing.assert_allclose(again.joints, result.joints, atol=1e-5)
+    counts = refiner.n_parameters()
+    assert counts["total"] == sum(v for k, v in counts.items() if k != "total") > 0
+
+
+def test_forced_refinement_is_continuous_and_keeps_bones(tiny_refiner, humanact12):
+    """Flag everything: changed windows meet kept frames without position or velocity jumps."""
+    refiner, _ = tiny_refiner
+    clip = humanact12[700]
+    rec = refiner.recognizer
+    saved = rec.threshold_, refiner.transition_refiner.threshold_
+    try:
+        rec.threshold_ = np.inf  # every anchor is flawed
+        refiner.transition_refiner.threshold_ = -1.0
+        out, report = refiner.refine(clip, return_report=True)
+    finally:
+        rec.threshold_, refiner.transition_refiner.threshold_ = saved
+    assert report.refined_anchors and report.flagged_transitions
+    np.testing.assert_allclose(bone_lengths(out.joints, "humanact12"), bone_lengths(clip.joints, "humanact12"), atol=1e-5)
+    changed = report.changed_frames
+    if changed.all():
+        return
+    vel = np.diff(out.joints, axis=0)
+    acc = np.linalg.norm(np.diff(vel, axis=0), axis=-1).max(-1)
+    real = np.linalg.norm(np.diff(np.diff(np.concatenate([m.joints for m in humanact12.motions[::10]]), axis=0), axis=0), axis=-1)
+    edges = np.flatnonzero(np.diff(changed.astype(int)))
+    assert len(edges)
+    for e in edges:
+        assert acc[max(e - 1, 0) : e + 2].max() < np.percentile(real.max(-1), 99.9)
+
+
+def test_input_kinds_and_no_mutation(tiny_refiner, humanact12):
+    refiner, _ = tiny_refiner
+    x = humanact12[10].numpy()
+    before = x.copy()
+    out = refiner.refine(x, action="warm_up")
+    assert isinstance(out, np.ndarray) and out.shape == x.shape and out.dtype == np.float32
+    np.testing.assert_array_equal(x, before)
+    batch = np.stack([humanact12[i].joints[:40] for i in (1, 2, 3)])
+    outs, reports = refiner.refine(batch, action=[0, 1, 2], return_report=True)
+    assert outs.shape == batch.shape and len(reports) == 3 and [r.action for r in reports] == [0, 1, 2]
+    t = torch.tensor(x)
+    out_t = refiner.refine(t)
+    assert isinstance(out_t, torch.Tensor) and out_t.dtype == torch.float32
+    np.testing.assert_allclose(out_t.numpy(), refiner.refine(x), atol=1e-6)
+    short = refiner.refine(x[:5], return_report=True)
+    np.testing.assert_array_equal(short[0], x[:5])
+    assert "unchanged" in short[1].note
+    for mode in ("anchor", "transition"):
+        assert refiner.refine(x, mode=mode).shape == x.shape
+
+
+@pytest.mark.parametrize("bad, kwargs, match", [
+    (np.full((30, 24, 3), np.nan), {}, "NaN"),
+    (np.zeros((30, 22, 3)), {}, "J=24"),
+    (np.zeros((1, 24, 3)), {}, "at least 2 frames"),
+    (np.zeros((30, 24, 3)), {"action": "dance"}, "unknown action"),
+    (np.zeros((30, 24, 3)), {"action": 12}, "0..11"),
+    (np.zeros((30, 24, 3)), {"mode": "magic"}, "unknown mode"),
+])
+def test_bad_input(tiny_refiner, bad, kwargs, match):
+    refiner, _ = tiny_refiner
+    with pytest.raises(ValueError, match=match):
+        refine(bad, refiner=refiner, **kwargs)
+
+
+def test_unknown_skeleton_and_corrupt_weights(tiny_refiner, tmp_path):
+    with pytest.raises(ValueError, match="unknown skeleton"):
+        refine(np.zeros((30, 24, 3)), skeleton="smpl99")
+    refiner, out = tiny_refiner
+    copy = tmp_path / "copy"
+    refiner.save(copy)
+    data = bytearray((copy / "recognizer.safetensors").read_bytes())
+    data[-100] ^= 0xFF  # flip one weight byte
+    (copy / "recognizer.safetensors").write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="sha256"):
+        Refiner.load(copy)
+
+
+def test_splice_is_c1_continuous(rng):
+    t = np.linspace(0, 2 * np.pi, 60)
+    original = np.stack([np.sin(t), np.cos(t), t / 10], -1)[:, None, :].repeat(3, 1).astype(np.float32)
+    # a smooth proposal that starts 0.3 m away: pasting it in directly would jump by 0.3 m
+    proposal = original + 0.3 + 0.1 * np.sin(3 * t)[:, None, None].astype(np.float32)
+    out = splice(original, proposal, 20, 40, blend=4)
+    np.testing.assert_array_equal(out[:20], original[:20])
+    np.testing.assert_array_equal(out[40:], original[40:])
+    assert np.abs(out[20:40] - original[20:40]).max() > 0.05  # it did change something
+    # velocity just inside each kept edge matches the original's (zero-slope taper)
+    for edge in (19, 39):
+        dv = np.abs((out[edge + 1] - out[edge]) - (original[edge + 1] - original[edge])).max()
+        assert dv < 0.05, dv
+
+
+def test_project_bone_lengths(rng):
+    skel = get_skeleton("humanact12")
+    reference = np.cumsum(rng.normal(size=(5, 24, 3)), axis=1).astype(np.float32)
+    moved = reference + rng.normal(scale=0.05, size=reference.shape).astype(np.float32)
+    frames = np.array([False, True, True, False, True])
+    out = project_bone_lengths(moved, reference, frames, skel.parents)
+    np.testing.assert_allclose(bone_lengths(out[frames], skel), bone_lengths(reference[frames], skel), rtol=1e-5)
+    np.testing.assert_array_equal(out[~frames], moved[~frames])
+    np.testing.assert_array_equal(out[frames][:, 0], moved[frames][:, 0])  # root kept
