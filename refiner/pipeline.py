@@ -49,6 +49,7 @@ class RefinementReport:
     action_name: str | None = None
     action_inferred: bool = False
     anchors: list[int] = field(default_factory=list)
+    anchor_probability: list[float] = field(default_factory=list)
     anchor_scores: list[float] = field(default_factory=list)
     threshold: float | None = None
     flagged_anchors: list[int] = field(default_factory=list)
@@ -274,6 +275,7 @@ class Refiner:
         report.action_name = self.action_names[report.action] if self.action_names else None
         anchors = rec.anchors
         report.anchors = anchors.tolist()
+        report.anchor_probability = [round(float(p), 4) for p in rec.probability]
         report.anchor_scores = [round(float(s), 3) for s in rec.scores]
         report.threshold = round(float(rec.threshold), 3)
         report.flagged_anchors = rec.flagged_anchors.tolist()
