@@ -26,7 +26,7 @@ from refiner.training import fit_network, resolve_device, seeded
 from refiner.validation import check_is_fitted, check_random_state
 
 __all__ = ["TransitionSet", "collect_transitions", "TransitionCVAEConfig", "TransitionCVAE", "TransitionGenerator",
-           "spline_frames"]
+           "spline_frames", "arc_length_profile", "retime"]
 
 #: Duration scale of the condition (frames); transitions are mostly under 60 frames.
 _DURATION_SCALE = 60.0
@@ -339,3 +339,29 @@ def _transition_batch(arrays: dict, idx, device) -> dict:
         sel = v[idx][:, :length] if k in ("frames", "valid") else v[idx]
         out[k] = torch.from_numpy(np.ascontiguousarray(sel)).to(device)
     return out
+
+
+def arc_length_profile(frames: np.ndarray) -> np.ndarray:
+    """Cumulative mean-joint path length of ``(L, J, 3)`` frames, normalised to end at 1, ``(L,)``."""
+    steps = np.linalg.norm(np.diff(frames, axis=0), axis=-1).mean(-1)
+    s = np.concatenate([[0.0], np.cumsum(steps)])
+    return s / s[-1] if s[-1] > 1e-9 else np.linspace(0.0, 1.0, len(frames))
+
+
+def retime(frames: np.ndarray, profile: np.ndarray) -> np.ndarray:
+    """Move along the path of ``frames`` ``(L, J, 3)`` with the speed profile ``profile`` ``(L,)``.
+
+    ``profile`` is the share of the path covered at each frame (0 -> 1, non-decreasing), for
+    example :func:`arc_length_profile` of a transition concept. Ends are kept exactly; the path
+    is linearly interpolated between frames.
+    """
+    s = arc_length_profile(frames)
+    if s[-1] - s[0] < 1e-9:
+        return frames.copy()
+    idx = np.interp(np.clip(profile, 0.0, 1.0), s, np.arange(len(frames)))
+    lo = np.floor(idx).astype(np.int64)
+    hi = np.minimum(lo + 1, len(frames) - 1)
+    w = (idx - lo)[:, None, None]
+    out = frames[lo] * (1 - w) + frames[hi] * w
+    out[0], out[-1] = frames[0], frames[-1]
+    return out.astype(frames.dtype)

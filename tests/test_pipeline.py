@@ -12,10 +12,10 @@ pytestmark = pytest.mark.real_data
 
 @pytest.fixture(scope="session")
 def tiny_refiner(humanact12, tmp_path_factory):
-    """The whole pipeline trained with the tiny configuration on 24 real clips (2 per action)."""
+    """The whole pipeline trained with the tiny configuration on 36 real clips (3 per action)."""
     from refiner.trainer import train_refiner
 
-    pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[:2]]
+    pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[:3]]
     out = tmp_path_factory.mktemp("tiny_refiner")
     refiner = train_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", half=False)
     return refiner, out
@@ -39,21 +39,29 @@ def test_tiny_pipeline_trains_and_refines(tiny_refiner, humanact12):
     assert counts["total"] == sum(v for k, v in counts.items() if k != "total") > 0
 
 
-def test_forced_refinement_is_continuous_and_keeps_bones(tiny_refiner, humanact12):
+@pytest.mark.parametrize("variant", [
+    {},  # the measured defaults: pose quality, posterior anchors, concept re-timing
+    {"quality": "encoder", "anchor_method": "concept", "transition_method": "network"},  # the paper's
+])
+def test_forced_refinement_is_continuous_and_keeps_bones(tiny_refiner, humanact12, variant):
     """Flag everything: changed windows meet kept frames without position or velocity jumps."""
-    refiner, _ = tiny_refiner
+    base, _ = tiny_refiner
+    parts = {k: getattr(base, k) for k in ("recognizer", "anchor_refiner", "transition_generator",
+                                           "transition_refiner", "anchor_concepts", "anchor_quality")}
+    manifest = {**base.manifest, "calibration": {"anchor_threshold": np.inf, "transition_threshold": -1.0}}
+    refiner = Refiner(**parts, action_names=base.action_names, manifest=manifest, **variant)
     clip = humanact12[700]
-    rec = refiner.recognizer
-    saved = rec.threshold_, refiner.transition_refiner.threshold_
+    saved = base.recognizer.threshold_, base.transition_refiner.threshold_
     try:
-        rec.threshold_ = np.inf  # every anchor is flawed
-        refiner.transition_refiner.threshold_ = -1.0
+        base.recognizer.threshold_, base.transition_refiner.threshold_ = np.inf, -1.0
         out, report = refiner.refine(clip, return_report=True)
     finally:
-        rec.threshold_, refiner.transition_refiner.threshold_ = saved
+        base.recognizer.threshold_, base.transition_refiner.threshold_ = saved
     assert report.refined_anchors and report.flagged_transitions
+    assert len(report.flagged_anchors) == len(report.anchors)
     np.testing.assert_allclose(bone_lengths(out.joints, "humanact12"), bone_lengths(clip.joints, "humanact12"), atol=1e-5)
     changed = report.changed_frames
+    assert np.abs(out.joints - clip.joints).max() > 1e-3
     if changed.all():
         return
     vel = np.diff(out.joints, axis=0)
@@ -133,7 +141,9 @@ def test_project_bone_lengths(rng):
     reference = np.cumsum(rng.normal(size=(5, 24, 3)), axis=1).astype(np.float32)
     moved = reference + rng.normal(scale=0.05, size=reference.shape).astype(np.float32)
     frames = np.array([False, True, True, False, True])
-    out = project_bone_lengths(moved, reference, frames, skel.parents)
+    lengths = np.zeros((5, 24))
+    lengths[:, skel.bones[:, 1]] = bone_lengths(reference, skel)
+    out = project_bone_lengths(moved, lengths, frames, skel.parents)
     np.testing.assert_allclose(bone_lengths(out[frames], skel), bone_lengths(reference[frames], skel), rtol=1e-5)
     np.testing.assert_array_equal(out[~frames], moved[~frames])
     np.testing.assert_array_equal(out[frames][:, 0], moved[frames][:, 0])  # root kept
