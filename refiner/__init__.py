@@ -8,17 +8,28 @@ from refiner.skeletons import Skeleton, get_skeleton, list_skeletons, register_s
 __all__ = [
     "Motion",
     "RefinedGenerator",
+    "Refiner",
+    "RefinementReport",
     "Skeleton",
     "__version__",
     "get_skeleton",
     "list_skeletons",
+    "refine",
     "register_skeleton",
     "stack_motions",
     "unstack_motions",
 ]
 
 
+_LAZY = {"refine": "refiner.pipeline", "Refiner": "refiner.pipeline", "RefinementReport": "refiner.pipeline"}
+
+
 def __getattr__(name):
+    # the pipeline imports torch and the networks: load it on first use so `import refiner` stays cheap
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
     if name == "__version__":
         from importlib.metadata import PackageNotFoundError, version
 

@@ -147,3 +147,20 @@ def test_project_bone_lengths(rng):
     np.testing.assert_allclose(bone_lengths(out[frames], skel), bone_lengths(reference[frames], skel), rtol=1e-5)
     np.testing.assert_array_equal(out[~frames], moved[~frames])
     np.testing.assert_array_equal(out[frames][:, 0], moved[frames][:, 0])  # root kept
+
+
+def test_shipped_weights_refine_a_60_frame_clip(humanact12):
+    """The default refine() on a fresh install: shipped weights, CPU, one call, a real clip barely moves."""
+    import refiner
+
+    clip = humanact12[100].crop(0, 60)
+    out, report = refiner.refine(clip, return_report=True)
+    assert out.joints.shape == (60, 24, 3) and report.action == clip.action
+    assert 100 * np.linalg.norm(out.joints - clip.joints, axis=-1).mean() < 1.0
+    model = Refiner.pretrained("humanact12")
+    assert model.manifest["split"] == "all" and "non-commercial" in model.manifest["licence"]
+    bench = Refiner.pretrained("humanact12", split="train")
+    assert bench.manifest["subjects"] == list(range(1, 11))
+    assert set(bench.manifest["calibration"]) >= {"anchor_threshold", "transition_thresholds"}
+    with pytest.raises(ValueError, match="no shipped weights"):
+        Refiner.pretrained("uestc")
