@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from refiner import commands as _cmd
+
 __all__ = ["main", "COMMANDS"]
 
 
@@ -115,6 +117,12 @@ COMMANDS: dict[str, tuple[str, Callable, Callable]] = {
     "train": ("train the refiner's networks on a dataset", _train_arguments, _train_run),
     "bench": ("run benchmarks and print figures", _bench_arguments, _bench_run),
     "adapters": ("list installed generator adapters", _adapters_arguments, _adapters_run),
+    "demo": ("sample every action from a reference generator, refine, write pictures and a table",
+             _cmd.demo_arguments, _cmd.demo_run),
+    "refine": ("refine motion files (.npy/.npz joints or raw generator output)", _cmd.refine_arguments,
+               _cmd.refine_run),
+    "train-generator": ("train a reference generator (a2m or actor) on HumanAct12",
+                        _cmd.train_generator_arguments, _cmd.train_generator_run),
 }
 
 

@@ -1,0 +1,120 @@
+"""``motion-refiner refine``: round trip on a real clip, reports, GIF and BVH, batches, failures, no overwrite."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from refiner.cli import main
+
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """One torch thread, as the CLI uses (tiny networks run several times faster); restored after."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+@pytest.fixture(scope="module")
+def clip(humanact12):
+    """A real 60-frame HumanAct12 clip (subject 11, held out), first-frame root at the origin."""
+    test = humanact12.split("test")
+    motion = next(m for m in test.motions if m.n_frames >= 60 and m.action == 1)
+    return motion.crop(0, 60).normalized().joints.copy()
+
+
+@pytest.mark.real_data
+def test_round_trip_with_report_gif_and_bvh(clip, tmp_path, capsys):
+    from refiner.bvh import load_bvh
+
+    src = tmp_path / "walk.npy"
+    np.save(src, clip)
+    out = tmp_path / "out" / "walk_refined.npy"
+    code = main(["refine", str(src), "-o", str(out), "--action", "walk", "--report", "--gif", "--bvh"])
+    assert code == 0, capsys.readouterr().err
+    assert "refined 1 of 1 file(s)" in capsys.readouterr().out
+    np.testing.assert_array_equal(np.load(src), clip)  # the input is untouched
+    refined = np.load(out)
+    assert refined.shape == clip.shape and refined.dtype == np.float32
+    report = json.loads((tmp_path / "out" / "walk_refined.report.json").read_text())
+    (clip_report,) = report["clips"]
+    assert clip_report["action"] == 1 and clip_report["n_frames"] == 60 and report["mode"] == "full"
+    changed = np.zeros(60, dtype=bool)
+    for c in clip_report["changes"]:
+        changed[c["start"]:c["stop"]] = True
+    np.testing.assert_array_equal(refined[~changed], clip[~changed])
+    assert np.abs(refined - clip).max() < 0.25  # real mocap is barely moved
+    joints, names = load_bvh(tmp_path / "out" / "walk_refined.bvh")
+    assert names[0] == "pelvis" and joints.shape == (60, 24, 3)
+    assert np.linalg.norm(joints - refined, axis=-1).max() < 1e-3  # within 1 mm
+    assert (tmp_path / "out" / "walk_refined.gif").stat().st_size > 1000
+
+
+@pytest.mark.real_data
+def test_refuses_to_overwrite_without_force(clip, tmp_path, capsys):
+    src, out = tmp_path / "a.npy", tmp_path / "b.npy"
+    np.save(src, clip[:30])
+    np.save(out, np.zeros(3))
+    assert main(["refine", str(src), "-o", str(out), "--mode", "transition"]) == 1
+    err = capsys.readouterr().err
+    assert "refusing to overwrite" in err and "--force" in err
+    np.testing.assert_array_equal(np.load(out), np.zeros(3))
+    assert main(["refine", str(src), "-o", str(out), "--mode", "transition", "--force"]) == 0
+    assert np.load(out).shape == (30, 24, 3)
+
+
+@pytest.mark.real_data
+def test_batch_reports_bad_files_and_continues(clip, tmp_path, capsys):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    np.save(folder / "good.npy", np.stack([clip[:40], clip[20:60]]))  # a batch (N, T, J, 3)
+    np.save(folder / "bad_shape.npy", np.zeros((10, 5)))
+    (folder / "corrupt.npz").write_bytes(b"not a zip file")
+    np.save(folder / "nan.npy", np.full((20, 24, 3), np.nan, dtype=np.float32))
+    (folder / "notes.txt").write_text("ignored")
+    code = main(["refine", str(folder), "-o", str(tmp_path / "out"), "--mode", "anchor"])
+    captured = capsys.readouterr()
+    assert code == 1
+    for name in ("bad_shape.npy", "corrupt.npz", "nan.npy"):
+        assert f"FAILED {folder / name}" in captured.err
+    assert "(T, J, 3)" in captured.err and "NaN" in captured.err
+    assert "refined 1 of 4 file(s); 3 failed" in captured.out
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["good.npy"]
+    assert np.load(tmp_path / "out" / "good.npy").shape == (2, 40, 24, 3)
+
+
+@pytest.mark.real_data
+def test_raw_generator_output_through_an_adapter(clip, tmp_path, capsys):
+    from refiner.adapters.action2motion import joints_to_lie, lie_to_joints
+
+    lie = joints_to_lie(clip[None])  # Action2Motion's Lie layout (1, 60, 72)
+    np.savez(tmp_path / "a2m.npz", output=lie, action=np.array([1]))
+    code = main(["refine", str(tmp_path / "a2m.npz"), "-o", str(tmp_path / "out"), "--adapter", "action2motion",
+                 "--option", "representation=lie", "--report"])
+    assert code == 0, capsys.readouterr().err
+    refined = np.load(tmp_path / "out" / "a2m.npy")
+    assert refined.shape == (1, 60, 24, 3)
+    report = json.loads((tmp_path / "out" / "a2m.report.json").read_text())
+    assert report["adapter"] == "action2motion" and report["clips"][0]["action"] == 1
+    decoded = lie_to_joints(lie)[0]  # the adapter's decoding with the default bone lengths
+    changed = np.zeros(60, dtype=bool)
+    for c in report["clips"][0]["changes"]:
+        changed[c["start"]:c["stop"]] = True
+    np.testing.assert_allclose(refined[0][~changed], decoded[~changed], atol=1e-5)
+
+
+def test_usage_errors(tmp_path, capsys):
+    np.save(tmp_path / "x.npy", np.zeros((10, 24, 3)))
+    assert main(["refine", str(tmp_path / "missing.npy"), "-o", str(tmp_path / "o.npy")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["refine", str(tmp_path / "x.npy"), "-o", str(tmp_path / "o"), "--option", "a=1"]) == 2
+    assert "--adapter" in capsys.readouterr().err
+    assert main(["refine", str(tmp_path / "x.npy"), "-o", str(tmp_path / "o"), "--adapter", "nope"]) == 2
+    assert "unknown adapter 'nope'" in capsys.readouterr().err
+    assert main(["refine", str(tmp_path), "-o", str(tmp_path / "o.npy")]) == 2
+    assert "must be a folder" in capsys.readouterr().err

@@ -1,0 +1,115 @@
+"""``motion-refiner demo`` on the tiny configuration: every file, consistent numbers, the printed table."""
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from refiner.cli import main
+
+PER_ACTION = ("{}.gif", "{}_keyframes.png", "{}_scores.png", "{}_before.npy", "{}_after.npy", "{}_report.json")
+
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """One torch thread, as the CLI uses (tiny networks run several times faster); restored after."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
+    """The quick demo through the CLI, once: ``(folder, printed text)``."""
+    import contextlib
+    import io
+
+    import torch
+
+    out = tmp_path_factory.mktemp("demo")
+    buffer = io.StringIO()
+    threads = torch.get_num_threads()
+    try:
+        with contextlib.redirect_stdout(buffer):
+            code = main(["demo", "--out", str(out), "--quick", "--no-mp4"])
+    finally:
+        torch.set_num_threads(threads)  # the CLI sets one thread for its process
+    assert code == 0
+    return out, buffer.getvalue()
+
+
+@pytest.mark.real_data
+def test_quick_demo_writes_every_file(demo_run):
+    from PIL import Image
+
+    out, printed = demo_run
+    for stem in ("01_walk", "10_boxing"):
+        for pattern in PER_ACTION:
+            path = out / pattern.format(stem)
+            assert path.is_file() and path.stat().st_size > 0, path
+        before, after = np.load(out / f"{stem}_before.npy"), np.load(out / f"{stem}_after.npy")
+        assert before.shape == after.shape == (60, 24, 3)
+        np.testing.assert_allclose(before[0, 0], 0.0, atol=1e-6)
+        report = json.loads((out / f"{stem}_report.json").read_text())
+        assert report["n_frames"] == 60 and len(report["anchor_probability"]) == 60
+        changed = np.zeros(60, dtype=bool)
+        for c in report["changes"]:
+            changed[c["start"]:c["stop"]] = True
+        # Only reported frames may move; untouched frames are bit-identical.
+        np.testing.assert_array_equal(before[~changed], after[~changed])
+        with Image.open(out / f"{stem}.gif") as gif:
+            assert gif.n_frames == 24  # the quick animation shows the first 24 frames
+        with Image.open(out / f"{stem}_keyframes.png") as png:
+            assert png.size[0] > 2 * png.size[1]  # a strip: two rows, six or more columns
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["action_name"] for r in summary["rows"]] == ["walk", "boxing"]
+    for row in summary["rows"]:
+        assert 0.0 <= row["confidence_before"] <= 1.0 and 0.0 <= row["confidence_after"] <= 1.0
+        assert row["flagged_anchors"] <= row["anchors"]
+        report = json.loads((out / f"{row['action']:02d}_{row['action_name']}_report.json").read_text())
+        changed = np.zeros(60, dtype=bool)
+        for c in report["changes"]:
+            changed[c["start"]:c["stop"]] = True
+        assert row["frames_changed"] == int(changed.sum())
+        assert row["flagged_anchors"] == len(report["flagged_anchors"]) and row["anchors"] == len(report["anchors"])
+    assert "| walk |" in printed and "| boxing |" in printed and "confidence before" in printed
+    assert (out / "summary.md").read_text().count("\n|") >= 4
+
+
+@pytest.mark.real_data
+def test_demo_recogniser_confidence_matches_a_direct_call(demo_run):
+    """The table's 'before' confidence is the recogniser's softmax of the saved clip (fixed hidden state)."""
+    from refiner.evaluators import load_recognizer
+
+    out, _ = demo_run
+    summary = json.loads((out / "summary.json").read_text())
+    rec = load_recognizer("humanact12", hidden="fixed")
+    clips = np.stack([np.load(out / f"{r['action']:02d}_{r['action_name']}_before.npy") for r in summary["rows"]])
+    logits = rec.predict_logits(clips, crop="start").astype(np.float64)
+    p = np.exp(logits - logits.max(1, keepdims=True))
+    p /= p.sum(1, keepdims=True)
+    for i, r in enumerate(summary["rows"]):
+        assert abs(p[i, r["action"]] - r["confidence_before"]) < 1e-3
+
+
+@pytest.mark.real_data
+@pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="ffmpeg not on PATH")
+def test_demo_writes_mp4_when_ffmpeg_exists(tmp_path):
+    from refiner.demo import run_demo
+
+    result = run_demo(tmp_path, actions=["jump"], quick=True)
+    assert (tmp_path / "03_jump.mp4").is_file() and "03_jump.mp4" in result.rows[0].files
+
+
+def test_demo_rejects_unknown_generator_and_action(tmp_path):
+    from refiner.demo import run_demo
+
+    with pytest.raises(ValueError, match="unknown action 'fly'"):
+        run_demo(tmp_path, actions=["fly"])
+    with pytest.raises(ValueError, match="unknown reference generator"):
+        run_demo(tmp_path, generator="mdm")

@@ -1,0 +1,201 @@
+"""Reference generators: tiny fits, sample shapes and seeding, save/load, the adapter path, the shipped weights."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from refiner.reference_generators import (
+    GENERATOR_KINDS,
+    WEIGHTS_DIR,
+    LieVAEGenerator,
+    TransformerCVAEGenerator,
+    load_reference_generator,
+)
+from refiner.validation import NotFittedError
+
+TINY = {
+    LieVAEGenerator: dict(hidden=16, latent_dim=4),
+    TransformerCVAEGenerator: dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16),
+}
+RAW_SHAPE = {LieVAEGenerator: (60, 72), TransformerCVAEGenerator: (60, 24, 3)}
+
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """One torch thread, as the CLI uses (tiny networks run several times faster); restored after."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+@pytest.fixture(scope="module")
+def small_set(humanact12):
+    """Two clips of every action from subjects 1-10."""
+    train = humanact12.split("train")
+    idx = [i for a in range(12) for i in np.flatnonzero(train.actions == a)[:2]]
+    return train.subset(idx)
+
+
+@pytest.fixture(scope="module")
+def tiny_fitted(small_set):
+    return {cls: cls(**TINY[cls], n_epochs=2, steps_per_epoch=2, batch_size=8, device="cpu", random_state=0).fit(small_set)
+            for cls in TINY}
+
+
+@pytest.mark.real_data
+@pytest.mark.parametrize("cls", list(TINY), ids=lambda c: c.__name__)
+def test_tiny_fit_and_sample_shapes(cls, tiny_fitted):
+    gen = tiny_fitted[cls]
+    assert len(gen.history_) == 2 and all(np.isfinite(h["train"]) and np.isfinite(h["val"]) for h in gen.history_)
+    raw = gen.sample("walk", 3, random_state=0)
+    assert raw.shape == (3,) + RAW_SHAPE[cls] and raw.dtype == np.float32 and np.isfinite(raw).all()
+    np.testing.assert_array_equal(raw, gen.sample(1, 3, random_state=0))  # name and index agree, seeded
+    assert not np.allclose(raw, gen.sample(1, 3, random_state=1))
+    assert not np.allclose(raw[0], raw[1])  # different samples in one batch
+
+
+@pytest.mark.real_data
+@pytest.mark.parametrize("cls", list(TINY), ids=lambda c: c.__name__)
+def test_save_load_roundtrip(cls, tiny_fitted, tmp_path):
+    gen = tiny_fitted[cls]
+    gen.save(tmp_path / "g.safetensors")
+    again = cls.load(tmp_path / "g.safetensors")
+    np.testing.assert_allclose(again.sample(5, 2, random_state=3), gen.sample(5, 2, random_state=3), atol=1e-6)
+    assert again.action_names_ == gen.action_names_ and again.get_params() == gen.get_params()
+    gen.save(tmp_path / "h.safetensors", half=True)
+    half = cls.load(tmp_path / "h.safetensors")
+    assert (tmp_path / "h.safetensors").stat().st_size < 0.6 * (tmp_path / "g.safetensors").stat().st_size
+    np.testing.assert_allclose(half.sample(5, 2, random_state=3), gen.sample(5, 2, random_state=3), atol=5e-2)
+    other = next(c for c in TINY if c is not cls)
+    with pytest.raises(ValueError, match=cls.__name__):
+        other.load(tmp_path / "g.safetensors")
+
+
+@pytest.mark.real_data
+def test_lie_output_goes_through_the_action2motion_adapter(tiny_fitted):
+    gen = tiny_fitted[LieVAEGenerator]
+    motions = gen.to_motions(gen.sample("boxing", 2, random_state=0), "boxing")
+    assert len(motions) == 2 and motions[0].action == 10 and motions[0].joints.shape == (60, 24, 3)
+    np.testing.assert_allclose(motions[0].joints[0, 0], 0.0, atol=1e-6)  # the adapter re-centres frame 0
+    skel = motions[0].skeleton_info
+    # Forward kinematics puts every frame on the reference pose's bone lengths.
+    np.testing.assert_allclose(skel.bone_lengths(motions[1].joints), np.broadcast_to(
+        skel.bone_lengths(gen.reference_), (60, 23)), atol=1e-4)
+    assert 0.3 < float(np.linalg.norm(gen.reference_[15] - gen.reference_[0])) < 0.8  # a real pelvis-to-head pose
+
+
+@pytest.mark.real_data
+def test_joint_output_is_recentred_by_the_adapter(tiny_fitted):
+    gen = tiny_fitted[TransformerCVAEGenerator]
+    raw = gen.sample("walk", 2, random_state=0)
+    motions = gen.to_motions(raw)
+    np.testing.assert_allclose(motions[0].joints, raw[0] - raw[0, :1, :1], atol=1e-6)
+    assert motions[0].action is None
+
+
+def test_unfitted_and_bad_arguments(tiny_clip):
+    from refiner.motion import Motion
+
+    for cls in TINY:
+        with pytest.raises(NotFittedError):
+            cls().sample(0)
+        with pytest.raises(ValueError, match="action label"):
+            cls(**TINY[cls], n_epochs=1).fit([Motion(tiny_clip)])
+        with pytest.raises(ValueError, match="n_epochs"):
+            cls(n_epochs=0).fit([Motion(tiny_clip, action=1)])
+    with pytest.raises(ValueError, match="unknown reference generator"):
+        load_reference_generator("mdm")
+
+
+@pytest.mark.real_data
+def test_bad_sample_arguments(tiny_fitted):
+    gen = tiny_fitted[TransformerCVAEGenerator]
+    with pytest.raises(ValueError, match="action"):
+        gen.sample("fly", 1)
+    with pytest.raises(ValueError, match="index must be in 0..11"):
+        gen.sample(12, 1)
+    with pytest.raises(ValueError, match="`n`"):
+        gen.sample(0, 0)
+
+
+def test_shipped_weights_manifest():
+    manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
+    assert "non-commercial" in manifest["licence"]
+    total = 0
+    for kind, cls in GENERATOR_KINDS.items():
+        entry = manifest["generators"][kind]
+        assert entry["class"] == cls.__name__ and entry["split"] == "train" and entry["subjects"] == list(range(1, 11))
+        assert entry["dtype"] == "float16" and "train-generator" in entry["command"]
+        total += (WEIGHTS_DIR / entry["file"]).stat().st_size
+    assert total < 5e6
+
+
+@pytest.mark.real_data
+def test_shipped_generators_are_recognised(capsys):
+    """Samples of the shipped generators are recognised well above chance (1/12) by the HumanAct12 recogniser."""
+    from refiner.evaluators import load_recognizer
+    from refiner.metrics import accuracy
+
+    recognizer = load_recognizer("humanact12", hidden="fixed")
+    for kind in GENERATOR_KINDS:
+        gen = load_reference_generator(kind)
+        motions = [m for a in range(12) for m in gen.sample_motions(a, 4, random_state=a)]
+        acc = accuracy(recognizer.predict_logits(motions, crop="start"), [m.action for m in motions])
+        with capsys.disabled():
+            print(f"\n{kind}: recogniser accuracy on 48 samples {100 * acc:.1f} %")
+        assert acc > 0.3, kind
+
+
+@pytest.mark.real_data
+def test_train_generator_command(tmp_path, capsys):
+    from conftest import shared_data_dir
+
+    from refiner.cli import main
+
+    data = shared_data_dir() / "humanact12" / "humanact12_joints.npz"
+    assert main(["train-generator", "--kind", "actor", "--out", str(tmp_path), "--quick", "--data", str(data)]) == 0
+    assert "written to" in capsys.readouterr().out
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert manifest["generators"]["actor"]["clips"] == 919 and "--quick" in manifest["generators"]["actor"]["command"]
+    gen = load_reference_generator("actor", folder=tmp_path)
+    assert gen.sample(0, 1, random_state=0).shape == (1, 60, 24, 3)
+    (tmp_path / "actor.safetensors").write_bytes((tmp_path / "actor.safetensors").read_bytes()[:-8] + b"\0" * 8)
+    with pytest.raises(ValueError, match="sha256"):
+        load_reference_generator("actor", folder=tmp_path)
+
+
+@pytest.mark.real_data
+def test_lie_targets_are_smooth_and_decode_to_the_same_joints(humanact12):
+    from refiner.adapters.action2motion import joints_to_lie, lie_to_joints
+    from refiner.reference_generators import lie_targets
+
+    clips = [m.joints for m in humanact12.split("train").motions[:40]]
+    ours = [lie_targets(c) for c in clips]
+    for c, lie in zip(clips, ours):
+        assert lie.shape == (len(c), 72)
+        np.testing.assert_allclose(lie_to_joints(lie, reference=c[0], recenter=False), c, atol=1e-4)
+
+    def jumps(lies):
+        steps = np.concatenate([np.abs(np.diff(lie[:, 3:].reshape(len(lie), 23, 3), axis=0)).max(-1).ravel()
+                                for lie in lies])
+        return float((steps > 1.0).mean())
+
+    assert jumps(ours) < 0.3 * jumps([joints_to_lie(c) for c in clips])
+
+
+def test_unwrap_rotvecs_follows_a_rotation_through_pi():
+    from refiner.adapters.base import rotmat_to_rotvec, rotvec_to_rotmat
+    from refiner.reference_generators import unwrap_rotvecs
+
+    angles = np.linspace(2.6, 3.7, 12)  # about z, through pi
+    canonical = rotmat_to_rotvec(rotvec_to_rotmat(angles[:, None] * np.array([0.0, 0.0, 1.0])))
+    assert np.abs(np.diff(canonical[:, 2])).max() > 5  # inverse kinematics flips to the other side
+    lie = np.concatenate([np.zeros((12, 3)), canonical], axis=1)
+    out = unwrap_rotvecs(lie)
+    np.testing.assert_allclose(out[:, 5], angles, atol=1e-5)
+    np.testing.assert_allclose(rotvec_to_rotmat(out[:, 3:]), rotvec_to_rotmat(canonical), atol=1e-5)
