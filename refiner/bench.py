@@ -393,9 +393,53 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
     return "\n".join(lines)
 
 
+def bench_speed(data: Path | None, out: Path | None, quick: bool) -> str:
+    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters, CPU and CUDA."""
+    import resource
+
+    import torch
+
+    from refiner.datasets import load_humanact12
+    from refiner.pipeline import Refiner
+
+    dataset = load_humanact12(None if data is None else Path(data) / "humanact12" / "humanact12_joints.npz")
+    clips = [m.joints[:60] for m in dataset.split("test") if m.n_frames >= 60][: (8 if quick else 64)]
+    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    rows = []
+    for device in devices:
+        model = Refiner.load(Path(__file__).resolve().parent / "weights" / "humanact12-train", device=device)
+        for x in clips[:3]:
+            model.refine(x)  # warm up (first calls allocate and compile kernels)
+        times = []
+        for x in clips:
+            t0 = time.perf_counter()
+            model.refine(x)
+            if device == "cuda":
+                torch.cuda.synchronize()
+            times.append(time.perf_counter() - t0)
+        batch = np.stack(clips)
+        t0 = time.perf_counter()
+        model.refine(batch)
+        throughput = len(batch) / (time.perf_counter() - t0)
+        peak = (torch.cuda.max_memory_allocated() / 2**20 if device == "cuda"
+                else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+        rows.append([device, f"{torch.get_num_threads()} threads" if device == "cpu" else torch.cuda.get_device_name(),
+                     float(1000 * np.median(times)), float(1000 * np.percentile(times, 90)), float(throughput),
+                     f"{peak:.0f} MiB" + (" (process RSS)" if device == "cpu" else " (CUDA)")])
+        print(f"  {device}: median {rows[-1][2]:.1f} ms per 60-frame clip", flush=True)
+    counts = Refiner.pretrained("humanact12", split="train").n_parameters()
+    return "\n".join([
+        f"## Speed ({len(clips)} held-out 60-frame clips; paper: 0.017 s per clip, 6.23 M parameters)", "",
+        markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", "clips / s (batch of all)", "peak memory"], rows),
+        "", "Parameters: " + ", ".join(f"{k} {v:,}" for k, v in counts.items()) + ".",
+        "" if "cuda" in devices else "No CUDA device here; run the same command on a GPU machine for the GPU rows.",
+    ])
+
+
 SUITES: dict[str, Callable[[Path | None, Path | None, bool], str]] = {
     "concepts": bench_concepts,
     "refiner": bench_refiner,
+    "speed": bench_speed,
     "sanity": bench_sanity,
     "flaws": bench_flaws,
     "generators": bench_generators,

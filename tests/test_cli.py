@@ -32,3 +32,17 @@ def test_bench_concepts_quick(capsys):
     assert main(["bench", "concepts", "--quick", "--data", str(shared_data_dir())]) == 0
     out = capsys.readouterr().out
     assert "paper Table 2 MPJPE" in out and "wall on this machine" in out
+
+
+@pytest.mark.real_data
+@pytest.mark.slow
+def test_bench_refiner_and_speed_quick(capsys, tmp_path):
+    """Tiny configurations of the refiner and speed suites run and print their figures."""
+    from conftest import shared_data_dir
+
+    assert main(["bench", "refiner", "--quick", "--data", str(shared_data_dir())]) == 0
+    assert main(["bench", "speed", "--quick", "--data", str(shared_data_dir()), "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "(a) real clips: MPJPE change (cm)" in out and "anchor recognition recall" in out
+    assert "pose mixture (default)" in out and "median ms / clip" in out
+    assert "Speed" in (tmp_path / "REPORT.md").read_text()

@@ -26,3 +26,17 @@ def test_weights_folder_is_package_data():
 def test_console_script_runs():
     out = subprocess.run([sys.executable, "-m", "refiner", "--help"], capture_output=True, text=True)
     assert out.returncode == 0 and "concepts" in out.stdout
+
+
+def test_wheel_contains_the_weights(tmp_path):
+    """A built wheel ships every weights folder (package-data), not only editable installs."""
+    import zipfile
+
+    repo = importlib.resources.files("refiner").joinpath("..")
+    out = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+                          "-w", str(tmp_path), str(repo)], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    names = zipfile.ZipFile(next(tmp_path.glob("*.whl"))).namelist()
+    for folder in ("humanact12", "humanact12-train", "generators"):
+        assert any(n.startswith(f"refiner/weights/{folder}/") and n.endswith(".safetensors") for n in names), folder
+        assert f"refiner/weights/{folder}/manifest.json" in names
