@@ -46,3 +46,15 @@ def test_bench_refiner_and_speed_quick(capsys, tmp_path):
     assert "(a) real clips: MPJPE change (cm)" in out and "anchor recognition recall" in out
     assert "pose mixture (default)" in out and "median ms / clip" in out
     assert "Speed" in (tmp_path / "REPORT.md").read_text()
+
+
+@pytest.mark.real_data
+@pytest.mark.slow
+def test_bench_generators_quick(capsys):
+    """The generator benchmark (reference generators and the real A2M samples, before/after) runs tiny."""
+    from conftest import shared_data_dir
+
+    assert main(["bench", "generators", "--quick", "--data", str(shared_data_dir())]) == 0
+    out = capsys.readouterr().out
+    assert "| a2m | refined |" in out and "| actor | generated |" in out
+    assert "Real Action2Motion xyz-VAE samples (20 clips" in out
