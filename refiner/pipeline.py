@@ -39,7 +39,7 @@ from refiner.anchor_refinement import AnchorRefiner, masked_window
 from refiner.anchors import AnchorConcepts
 from refiner.motion import Motion
 from refiner.recognition import AnchorQuality, AnchorRecognizer
-from refiner.skeletons import bone_lengths, get_skeleton
+from refiner.skeletons import get_skeleton, joint_bone_lengths, with_bone_lengths
 from refiner.splines import eval_spline, fit_spline
 from refiner.transition_refinement import TransitionRefiner
 from refiner.transitions import TransitionGenerator, arc_length_profile, retime
@@ -141,22 +141,13 @@ def splice(original: np.ndarray, proposal: np.ndarray, lo: int, hi: int, *, blen
     return out
 
 
-def project_bone_lengths(joints: np.ndarray, lengths: np.ndarray, frames: np.ndarray, parents) -> np.ndarray:
+def project_bone_lengths(joints: np.ndarray, lengths: np.ndarray, frames: np.ndarray, skeleton="humanact12") -> np.ndarray:
     """Put ``frames`` of ``joints`` ``(T, J, 3)`` on the given bone lengths, keeping the root and bone directions.
 
     ``lengths`` is ``(T, J)``: the length of the bone ending at each joint (the root's is unused).
     """
     out = joints.copy()
-    for t in np.flatnonzero(frames):
-        for j, p in enumerate(parents):
-            if p < 0:
-                continue
-            v = joints[t, j] - joints[t, p]
-            norm = np.linalg.norm(v)
-            if norm > 1e-9:
-                out[t, j] = out[t, p] + v * (lengths[t, j] / norm)
-            else:
-                out[t, j] = out[t, p]
+    out[frames] = with_bone_lengths(joints[frames], lengths[frames], skeleton)
     return out
 
 
@@ -361,7 +352,7 @@ class Refiner:
         if mode in ("full", "transition"):
             y = self._refine_transitions(y, anchors, report, changed, touched if mode == "full" else set())
         if changed.any():
-            y = project_bone_lengths(y, _reference_lengths(x, self.skeleton), changed, get_skeleton(self.skeleton).parents)
+            y = project_bone_lengths(y, _reference_lengths(x, self.skeleton), changed, self.skeleton)
         return y, report
 
     def _anchor_scores(self, x, anchors, action, rec) -> tuple[np.ndarray, float]:
@@ -547,14 +538,10 @@ def _reference_lengths(x: np.ndarray, skeleton: str) -> np.ndarray:
     """Bone lengths ``(T, J)`` to restore: where a bone's length is constant over the clip (spread
     under 2 %, as in mocap) its median, so a distorted frame goes back to the true length; elsewhere
     (generators whose bones stretch) each frame's own length."""
-    skel = get_skeleton(skeleton)
-    lengths = bone_lengths(x, skel)  # (T, J-1) in bone order
+    lengths = joint_bone_lengths(x, skeleton)  # (T, J)
     median = np.median(lengths, axis=0)
     rigid = lengths.std(0) < 0.02 * np.maximum(median, 1e-9)
-    out = np.zeros(x.shape[:2], dtype=np.float64)
-    for b, (_, j) in enumerate(skel.bones):
-        out[:, j] = median[b] if rigid[b] else lengths[:, b]
-    return out
+    return np.where(rigid, median, lengths)
 
 
 def _check_choice(name: str, value: str, choices) -> str:

@@ -28,6 +28,7 @@ from torch import nn
 from refiner.components import NOT_FITTED, NetworkComponent
 from refiner.encoders import MLP, MotionEncoder, MotionEncoderConfig
 from refiner.serialization import check_metadata, load_state, pack_metadata, save_state
+from refiner.skeletons import joint_bone_lengths, with_bone_lengths
 from refiner.training import ClipCrops, fit_network, resolve_device, seeded
 from refiner.validation import check_is_fitted, check_random_state
 
@@ -369,7 +370,7 @@ class AnchorQuality(BaseEstimator):
 
     def fit(self, poses, actions, *, validation=None, n_actions: int | None = None) -> "AnchorQuality":
         """Fit on real anchor poses ``(N, J, 3)`` with their actions; ``validation=(poses, actions)`` sets the threshold."""
-        self.lengths_ = _joint_lengths(np.asarray(poses, dtype=np.float64), self.skeleton).mean(0)
+        self.lengths_ = joint_bone_lengths(np.asarray(poses, dtype=np.float64), self.skeleton).mean(0)
         x = self._features(poses)
         actions = np.asarray(actions, dtype=np.int64)
         if len(x) != len(actions) or len(x) == 0:
@@ -419,13 +420,13 @@ class AnchorQuality(BaseEstimator):
         original = np.asarray(poses, dtype=np.float64)
         denoised = out.reshape(original.shape)
         # back onto the input's own proportions: the repaired bone directions, the input's lengths
-        return _with_lengths(denoised, _joint_lengths(original, self.skeleton), self.skeleton).astype(np.float32)
+        return with_bone_lengths(denoised, joint_bone_lengths(original, self.skeleton), self.skeleton).astype(np.float32)
 
     def _features(self, poses) -> np.ndarray:
         p = np.asarray(poses, dtype=np.float64)
         if p.ndim != 3 or p.shape[-1] != 3:
             raise ValueError(f"`poses` must have shape (N, J, 3); got {p.shape}.")
-        return _flat_root_relative(_with_lengths(p, np.broadcast_to(self.lengths_, p.shape[:2]), self.skeleton))
+        return _flat_root_relative(with_bone_lengths(p, np.broadcast_to(self.lengths_, p.shape[:2]), self.skeleton))
 
     def save(self, path) -> None:
         check_is_fitted(self, "weights_", msg=NOT_FITTED)
@@ -451,26 +452,3 @@ def _flat_root_relative(poses) -> np.ndarray:
         raise ValueError(f"`poses` must have shape (N, J, 3); got {p.shape}.")
     return (p - p[:, :1]).reshape(len(p), -1)
 
-
-def _joint_lengths(poses: np.ndarray, skeleton: str) -> np.ndarray:
-    """``(N, J)`` length of the bone ending at each joint (root 0)."""
-    from refiner.skeletons import get_skeleton
-
-    parents = np.array(get_skeleton(skeleton).parents)
-    out = np.linalg.norm(poses - poses[:, np.maximum(parents, 0)], axis=-1)
-    out[:, parents < 0] = 0.0
-    return out
-
-
-def _with_lengths(poses: np.ndarray, lengths: np.ndarray, skeleton: str) -> np.ndarray:
-    """Poses ``(N, J, 3)`` rebuilt from the root with each bone's direction and the given lengths ``(N, J)``."""
-    from refiner.skeletons import get_skeleton
-
-    out = poses.copy()
-    for j, p in enumerate(get_skeleton(skeleton).parents):
-        if p < 0:
-            continue
-        v = poses[:, j] - poses[:, p]
-        norm = np.linalg.norm(v, axis=-1, keepdims=True)
-        out[:, j] = out[:, p] + v / np.maximum(norm, 1e-9) * lengths[:, j : j + 1]
-    return out

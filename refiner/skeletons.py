@@ -11,6 +11,8 @@ import numpy as np
 
 __all__ = [
     "Skeleton",
+    "joint_bone_lengths",
+    "with_bone_lengths",
     "get_skeleton",
     "list_skeletons",
     "register_skeleton",
@@ -129,6 +131,31 @@ def bone_lengths(joints, skeleton: Skeleton | str) -> np.ndarray:
     x = np.asarray(joints)
     bones = skel.bones
     return np.linalg.norm(x[..., bones[:, 1], :] - x[..., bones[:, 0], :], axis=-1)
+
+
+def joint_bone_lengths(joints, skeleton: Skeleton | str) -> np.ndarray:
+    """``(..., J)`` length of the bone ending at each joint (0 at the root), joints ``(..., J, 3)``."""
+    skel = get_skeleton(skeleton)
+    x = np.asarray(joints)
+    parents = np.array(skel.parents)
+    out = np.linalg.norm(x - x[..., np.maximum(parents, 0), :], axis=-1)
+    out[..., parents < 0] = 0.0
+    return out
+
+
+def with_bone_lengths(joints, lengths, skeleton: Skeleton | str) -> np.ndarray:
+    """Rebuild joints ``(..., J, 3)`` from the root outwards: each bone keeps its direction and gets
+    the length ``lengths[..., j]`` of the bone ending at joint ``j`` (a zero-length bone stays at its parent)."""
+    skel = get_skeleton(skeleton)
+    x = np.asarray(joints)
+    out = x.copy()
+    for j, p in enumerate(skel.parents):
+        if p < 0:
+            continue
+        v = x[..., j, :] - x[..., p, :]
+        norm = np.linalg.norm(v, axis=-1, keepdims=True)
+        out[..., j, :] = out[..., p, :] + v / np.maximum(norm, 1e-9) * lengths[..., j : j + 1]
+    return out
 
 
 def _axis_vector(axis: str) -> np.ndarray:

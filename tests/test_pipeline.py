@@ -143,7 +143,7 @@ def test_project_bone_lengths(rng):
     frames = np.array([False, True, True, False, True])
     lengths = np.zeros((5, 24))
     lengths[:, skel.bones[:, 1]] = bone_lengths(reference, skel)
-    out = project_bone_lengths(moved, lengths, frames, skel.parents)
+    out = project_bone_lengths(moved, lengths, frames, skel)
     np.testing.assert_allclose(bone_lengths(out[frames], skel), bone_lengths(reference[frames], skel), rtol=1e-5)
     np.testing.assert_array_equal(out[~frames], moved[~frames])
     np.testing.assert_array_equal(out[frames][:, 0], moved[frames][:, 0])  # root kept
