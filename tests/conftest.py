@@ -50,6 +50,17 @@ def humanact12():
 
 
 @pytest.fixture
+def one_torch_thread():
+    """One torch thread, as the CLI uses (tiny networks run several times faster); restored after."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture
 def pm():
     from refiner.plugins.manager import get_plugin_manager
 

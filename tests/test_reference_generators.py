@@ -22,16 +22,7 @@ TINY = {
 RAW_SHAPE = {LieVAEGenerator: (60, 72), TransformerCVAEGenerator: (60, 24, 3)}
 
 
-
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """One torch thread, as the CLI uses (tiny networks run several times faster); restored after."""
-    import torch
-
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 @pytest.fixture(scope="module")
 def small_set(humanact12):
