@@ -157,6 +157,7 @@ class PipelineRefiner:
         from refiner.pipeline import Refiner  # imported lazily: the pipeline is optional here
 
         self.mode = mode
+        self.kwargs = pretrained_kwargs
         self.refiner_ = Refiner.pretrained(**pretrained_kwargs)
 
     def refine(self, motion: Motion, *, action=None) -> Motion:
@@ -165,21 +166,25 @@ class PipelineRefiner:
         return out if isinstance(out, Motion) else m.with_joints(out)
 
     def __repr__(self) -> str:
-        return f"PipelineRefiner(mode={self.mode!r})"
+        extra = "".join(f", {k}={v!r}" for k, v in sorted(self.kwargs.items()))
+        return f"PipelineRefiner(mode={self.mode!r}{extra})"
 
 
 #: Refiners compared by ``motion-refiner bench flaws``: name -> zero-argument factory. The ``ours_*``
 #: factories load the weights trained on subjects 1-10 only (``split="train"``), since the benchmark
-#: runs on subjects 11-12; they raise (ImportError without ``refiner.pipeline``, ValueError without
-#: those weights) and the bench then skips them with a note.
+#: runs on subjects 11-12; they raise (ValueError without those weights) and the bench then skips
+#: them with a note. ``ours_full`` is the default (learned) refiner; ``ours_infill`` its in-filling
+#: variant; ``ours_concepts`` the anchor-score / transition-residual pipeline with the paper's parts.
 FLAW_REFINERS: dict[str, Callable[[], object]] = {
     "identity": IdentityRefiner,
     "savgol": SavgolRefiner,
     "gaussian": GaussianRefiner,
     "spline_fit": SplineFitRefiner,
+    "ours_full": lambda: PipelineRefiner("full", split="train"),
     "ours_anchor": lambda: PipelineRefiner("anchor", split="train"),
     "ours_transition": lambda: PipelineRefiner("transition", split="train"),
-    "ours_full": lambda: PipelineRefiner("full", split="train"),
+    "ours_infill": lambda: PipelineRefiner("full", split="train", repair="infill"),
+    "ours_concepts": lambda: PipelineRefiner("full", split="train", method="concepts"),
 }
 
 

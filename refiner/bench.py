@@ -119,124 +119,6 @@ def bench_sanity(data: Path | None, out: Path | None, quick: bool) -> str:
     return "\n".join(lines)
 
 
-def bench_flaws(data: Path | None, out: Path | None, quick: bool, *, stride: int = 1,
-                severities: tuple[int, ...] | None = None) -> str:
-    """Refiners against synthetic flaws on held-out clips (subjects 11-12): MPJPE, acceleration, recogniser.
-
-    ``stride`` keeps every stride-th test clip and ``severities`` limits the severities: the full run
-    (272 clips x 7 families x 3 severities x 7 refiners) takes about an hour on 2 cores.
-    """
-    import json
-
-    from refiner.baselines import FLAW_REFINERS
-    from refiner.evaluators import crop_clip
-    from refiner.flaws import FLAW_FAMILIES, SEVERITIES, corrupt
-    from refiner.metrics import accuracy, fid
-    from refiner.physics import acceleration_error
-    from refiner.segmentation import segment
-
-    dataset, recognizer = _humanact12_and_recognizer(data, hidden="fixed")
-    test = dataset.split("test")
-    if quick:
-        test = test.subset(range(0, len(test), 7))
-    elif stride > 1:
-        test = test.subset(range(0, len(test), stride))
-    clips = test.motions
-    labels = test.actions
-    severities = (2,) if quick else (tuple(severities) if severities else SEVERITIES)
-    segs = [segment(m.joints) for m in clips]
-    donors = [[d for j, d in enumerate(clips) if j != i and d.action == m.action] for i, m in enumerate(clips)]
-    n_frames = recognizer.config.n_frames
-
-    notes, refiners = [], {}
-    for name, factory in FLAW_REFINERS.items():
-        try:
-            refiners[name] = factory()
-        except Exception as e:  # an optional refiner that cannot be built is skipped, not fatal
-            notes.append(f"- `{name}` skipped: {type(e).__name__}: {e}")
-            print(f"  note: {notes[-1][2:]}", flush=True)
-
-    def windows(ms, starts):
-        return np.stack([crop_clip(m.joints, n_frames, s) for m, s in zip(ms, starts)])
-
-    def score(outs, refs, starts, ref_feats, mask=None):
-        """MPJPE all / masked frames (cm), acceleration error (m/s²), accuracy, FID vs ref windows."""
-        err = [np.linalg.norm(o.joints.astype(np.float64) - r.joints, axis=-1) for o, r in zip(outs, refs)]
-        all_cm = 100 * float(np.mean([e.mean() for e in err]))
-        masked = [e[k].mean() for e, k in zip(err, mask)] if mask is not None else []
-        masked_cm = 100 * float(np.mean(masked)) if masked else float("nan")
-        acc_err = float(np.mean([acceleration_error(o, r) for o, r in zip(outs, refs)]))
-        feats, logits = recognizer.features_and_logits(windows(outs, starts))
-        try:
-            f = fid(feats, ref_feats)
-        except ValueError:
-            f = float("nan")
-        return [all_cm, masked_cm, acc_err, 100 * accuracy(logits, labels), f]
-
-    def run(name, refiner, inputs):
-        try:
-            return [refiner.refine(m, action=m.action) for m in inputs]
-        except Exception as e:  # a failing optional refiner is reported and dropped
-            notes.append(f"- `{name}` failed and was dropped: {type(e).__name__}: {e}")
-            print(f"  note: {notes[-1][2:]}", flush=True)
-            return None
-
-    t0 = time.perf_counter()
-    centre = [max(len(m) - n_frames, 0) // 2 for m in clips]
-    clean_feats = recognizer.features(windows(clips, centre))
-    clean_rows, records = [], []
-    for name in list(refiners):
-        outs = run(name, refiners[name], clips)
-        if outs is None:
-            del refiners[name]
-            continue
-        all_cm, _, acc_err, acc, f = score(outs, clips, centre, clean_feats)
-        clean_rows.append([name, all_cm, acc_err, acc, f])
-
-    detail, per_refiner = [], {name: [] for name in refiners}
-    for family in FLAW_FAMILIES:
-        for severity in severities:
-            flawed = [corrupt(m, family, severity, random_state=i, segmentation=segs[i], donors=donors[i])
-                      for i, m in enumerate(clips)]
-            masks = [c.mask for c in flawed]
-            starts = [int(np.clip(np.flatnonzero(k).mean() - n_frames / 2 if k.any() else 0, 0,
-                                  max(len(k) - n_frames, 0))) for k in masks]
-            ref_feats = recognizer.features(windows(clips, starts))
-            for name in list(refiners):
-                outs = run(name, refiners[name], [c.motion for c in flawed])
-                if outs is None:
-                    del refiners[name]
-                    continue
-                row = score(outs, clips, starts, ref_feats, masks)
-                per_refiner[name].append(row)
-                detail.append([family, severity, name] + row)
-                records.append({"family": family, "severity": severity, "refiner": name,
-                                **dict(zip(("mpjpe_cm", "mpjpe_flawed_cm", "accel_error", "accuracy", "fid"), row))})
-        print(f"  {family}: done ({time.perf_counter() - t0:.1f} s)", flush=True)
-
-    metric_names = ["MPJPE cm", "MPJPE flawed frames cm", "accel. error m/s²", "accuracy %", "FID"]
-    summary = [[name] + [float(np.nanmean(col)) for col in np.array(rows).T] for name, rows in per_refiner.items()
-               if name in refiners and rows]
-    lines = [f"## Flaws (HumanAct12 subjects 11-12, {len(clips)} clips, severities {list(severities)}, "
-             f"{len(FLAW_FAMILIES)} families)", "",
-             "Each family (see `refiner.flaws`) corrupts every held-out clip (seed = clip index); each refiner "
-             "then refines it with its true action. MPJPE and acceleration error are against the clean clip; "
-             f"accuracy and FID come from the Action2Motion recogniser on a {n_frames}-frame window centred on "
-             "the flaw (hidden state fixed, so refiners are compared on identical noise), FID against the clean "
-             "clips' same windows.", ""]
-    lines += notes + ([""] if notes else [])
-    lines += ["### Mean over families and severities", "", markdown_table(["refiner"] + metric_names, summary), "",
-              "### Change on clean clips (do no harm)", "",
-              markdown_table(["refiner", "MPJPE cm", "accel. change m/s²", "accuracy %", "FID"], clean_rows), "",
-              "### Per family and severity", "",
-              markdown_table(["family", "severity", "refiner"] + metric_names, detail),
-              "", f"{time.perf_counter() - t0:.1f} s wall."]
-    if out is not None:
-        Path(out).mkdir(parents=True, exist_ok=True)
-        (Path(out) / "flaws.json").write_text(json.dumps({"clean": clean_rows, "flawed": records}, indent=1))
-    return "\n".join(lines)
-
-
 def bench_generators(data: Path | None, out: Path | None, quick: bool) -> str:
     """The shipped reference generators' samples before and after refinement, scored by the HumanAct12 recogniser."""
     import torch
@@ -276,11 +158,12 @@ def _bench_generators(dataset, recognizer, real, refiner, per_action: int, n_rep
         before = [m for a in range(n_actions)
                   for m in gen.sample_motions(a, per_action, random_state=1000 * a + 7)]
         t0 = time.perf_counter()
-        refined = [refiner.refine(m, action=m.action, return_report=True) for m in before]
+        joints, reports = refiner.refine(np.stack([m.joints for m in before]), action=[m.action for m in before],
+                                         return_report=True)
         seconds = time.perf_counter() - t0
-        after = [r[0] for r in refined]
-        changed = float(np.mean([r[1].changed_frames.mean() for r in refined]))
-        flagged = float(np.mean([len(r[1].flagged_anchors) for r in refined]))
+        after = [m.with_joints(j) for m, j in zip(before, joints)]
+        changed = float(np.mean([r.changed_frames.mean() for r in reports]))
+        flagged = float(np.mean([len(r.flagged_anchors) for r in reports]))
         for label, motions in (("generated", before), ("refined", after)):
             s = evaluate(recognizer, motions, real.motions, n_replications=n_rep, match_labels=True,
                          random_state=0).summary()
@@ -299,34 +182,10 @@ def _bench_generators(dataset, recognizer, real, refiner, per_action: int, n_rep
                  "", "", ""])
     lines.append(markdown_table(["generator", "samples", "accuracy %", "FID", "diversity", "multimodality",
                                  "frames changed %", "flagged anchors / clip", "refine s / clip"], rows))
-    lines += ["", _a2m_samples_section(recognizer, refiner)]
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
         (Path(out) / "generators.json").write_text(json.dumps(records, indent=1))
     return "\n".join(lines)
-
-
-def _a2m_samples_section(recognizer, refiner) -> str:
-    """Real Action2Motion xyz-VAE samples (``../shared/samples``) before and after refinement."""
-    from refiner.adapters.action2motion import to_motions
-    from refiner.datasets import default_data_dir
-
-    folder = default_data_dir().parent / "samples" / "action2motion"
-    path, labels_path = folder / "humanact12_xyz_vae_samples.npy", folder / "humanact12_xyz_vae_labels.npy"
-    if not path.is_file():
-        return f"(real Action2Motion samples not found at {path}; skipped)"
-    labels = np.load(labels_path).astype(np.int64).ravel()
-    before = [m for m in to_motions(np.load(path), representation="xyz", recenter=True)]
-    before = [m.with_joints(m.joints) for m in before]
-    after = [refiner.refine(m, action=int(a)) for m, a in zip(before, labels)]
-    acc = {}
-    for label, motions in (("generated", before), ("refined", after)):
-        acc[label] = [float(np.mean(recognizer.predict(motions, crop="start", random_state=seed) == labels))
-                      for seed in range(20)]
-    changed = float(np.mean([np.abs(a.joints - b.joints).max() > 0 for a, b in zip(after, before)]))
-    return (f"Real Action2Motion xyz-VAE samples ({len(before)} clips, their labels; accuracy averaged over 20 random "
-            f"GRU hidden states): generated {100 * np.mean(acc['generated']):.1f} %, refined "
-            f"{100 * np.mean(acc['refined']):.1f} %; {100 * changed:.0f} % of the clips changed.")
 
 
 def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
@@ -449,7 +308,8 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool) -> str:
             if device == "cuda":
                 torch.cuda.synchronize()
             times.append(time.perf_counter() - t0)
-        batch = np.stack(clips)
+        batch = np.stack([clips[i % len(clips)] for i in range(8 if quick else 256)])
+        model.refine(batch[:8])
         t0 = time.perf_counter()
         model.refine(batch)
         throughput = len(batch) / (time.perf_counter() - t0)
@@ -462,10 +322,22 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool) -> str:
     counts = Refiner.pretrained("humanact12", split="train").n_parameters()
     return "\n".join([
         f"## Speed ({len(clips)} held-out 60-frame clips; paper: 0.017 s per clip, 6.23 M parameters)", "",
-        markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", "clips / s (batch of all)", "peak memory"], rows),
+        markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", f"clips / s (batch of {8 if quick else 256})", "peak memory"], rows),
         "", "Parameters: " + ", ".join(f"{k} {v:,}" for k, v in counts.items()) + ".",
         "" if "cuda" in devices else "No CUDA device here; run the same command on a GPU machine for the GPU rows.",
     ])
+
+
+def _bench_flaws(data, out, quick, **kwargs):
+    from refiner.bench_flaws import bench_flaws
+
+    return bench_flaws(data, out, quick, **kwargs)
+
+
+def _bench_samples(data, out, quick):
+    from refiner.bench_samples import bench_samples
+
+    return bench_samples(data, out, quick)
 
 
 SUITES: dict[str, Callable[[Path | None, Path | None, bool], str]] = {
@@ -473,7 +345,8 @@ SUITES: dict[str, Callable[[Path | None, Path | None, bool], str]] = {
     "refiner": bench_refiner,
     "speed": bench_speed,
     "sanity": bench_sanity,
-    "flaws": bench_flaws,
+    "flaws": _bench_flaws,
+    "samples": _bench_samples,
     "generators": bench_generators,
 }
 

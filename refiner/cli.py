@@ -58,6 +58,11 @@ def _train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-seconds", type=float, default=None, help="time limit per module")
     p.add_argument("--only", default=None, help="train just this part (for parallel runs); rerun without to assemble")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--learned", action="store_true",
+                   help="train only the learned steps (flaw recognition and repair, the default method) and add them "
+                        "to the refiner in --base; --only flaw_recognizer / flaw_repairer trains one of them")
+    p.add_argument("--base", type=Path, default=None,
+                   help="with --learned: refiner folder whose concept and paper parts are kept (default: shipped weights of --split)")
 
 
 def _train_run(args: argparse.Namespace) -> int:
@@ -68,6 +73,17 @@ def _train_run(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     dataset = load_dataset(args.dataset, args.data)
+    if args.learned:
+        from refiner.learned_training import train_learned_refiner
+
+        refiner = train_learned_refiner(dataset, args.out, split=args.split, config=args.config, device=args.device,
+                                        random_state=args.seed, max_seconds=args.max_seconds, only=args.only,
+                                        base=args.base, progress=True)
+        if refiner is None:
+            print(f"trained part {args.only!r} into {args.out / 'parts'}")
+        else:
+            print(f"learned steps added; flaw threshold {refiner.flaw_recognizer.threshold_:.3f}; written to {args.out}")
+        return 0
     refiner = train_refiner(dataset, args.out, split=args.split, config=args.config, device=args.device,
                             random_state=args.seed, progress=True, max_seconds=args.max_seconds, only=args.only)
     if refiner is None:

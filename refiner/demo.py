@@ -206,7 +206,11 @@ def format_table(rows: Sequence[DemoRow]) -> str:
 def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n_frames: int | None,
                   mp4: bool | None, detect: float) -> list[str]:
     """Every file of one action; returns their names."""
-    flagged = [int(f) for f in report.flagged_anchors]
+    repaired = np.zeros(before.n_frames, bool)
+    for change in report.changes:
+        if change["step"] != "skeleton":  # the rigid-skeleton step touches every frame; it is not a flaw
+            repaired[change["start"] : change["stop"]] = True
+    flagged = sorted({int(f) for f in report.flagged_anchors} | set(np.flatnonzero(repaired).tolist()))
     np.save(out / f"{stem}_before.npy", before.joints)
     np.save(out / f"{stem}_after.npy", after.joints)
     (out / f"{stem}_report.json").write_text(json.dumps(report.to_dict(), indent=1) + "\n")
@@ -218,11 +222,15 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
                              labels=("generated", "refined"), mp4=mp4, **gif)
     viz.keyframe_strip([before, after], flagged=flagged, path=out / f"{stem}_keyframes.png",
                        labels=("generated", "refined"), n_keyframes=6 if n_frames else 8)
-    probability = np.asarray(report.anchor_probability, dtype=np.float64)
+    if report.flaw_probability:  # the learned method: per-frame flaw probability and its threshold
+        probability, threshold, label = report.flaw_probability, report.threshold, "flaw probability"
+    else:
+        probability, threshold, label = report.anchor_probability, detect, "anchor probability"
+    probability = np.asarray(probability, dtype=np.float64)
     if probability.size != before.n_frames:  # clips too short to refine carry no per-frame scores
         probability = np.zeros(before.n_frames)
-    viz.plot_scores(probability, detect, anchors=report.anchors, flagged=flagged, path=out / f"{stem}_scores.png",
-                    fps=before.fps, label="anchor probability")
+    viz.plot_scores(probability, threshold, anchors=report.anchors, flagged=flagged, path=out / f"{stem}_scores.png",
+                    fps=before.fps, label=label)
     names = [f"{stem}.gif"] + [p.name for p in animations[1:]]
     names += [f"{stem}_keyframes.png", f"{stem}_scores.png", f"{stem}_before.npy", f"{stem}_after.npy",
               f"{stem}_report.json"]

@@ -37,6 +37,9 @@ import numpy as np
 
 from refiner.anchor_refinement import AnchorRefiner, masked_window
 from refiner.anchors import AnchorConcepts
+from refiner.learned_pipeline import REPAIRS, check_detect, refine_batch
+from refiner.flaw_classifier import FlawClassifier
+from refiner.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.motion import Motion
 from refiner.recognition import AnchorQuality, AnchorRecognizer
 from refiner.skeletons import get_skeleton, joint_bone_lengths, with_bone_lengths
@@ -55,11 +58,17 @@ _PARTS = {
     "transition_refiner": TransitionRefiner,
     "anchor_concepts": AnchorConcepts,
     "anchor_quality": AnchorQuality,
+    "flaw_recognizer": FlawRecognizer,
+    "flaw_repairer": FlawRepairer,
+    "flaw_classifier": FlawClassifier,
 }
 _NO_DEVICE = ("anchor_concepts", "anchor_quality")
 QUALITY = ("pose", "encoder")
 ANCHOR_METHODS = ("posterior", "concept")
 TRANSITION_METHODS = ("network", "retime")
+#: ``"learned"``: flaw recognition + repair networks (:mod:`refiner.learned_pipeline`); ``"concepts"``:
+#: the anchor-score / transition-residual pipeline below, with the paper's variants as options.
+METHODS = ("learned", "concepts")
 _WEIGHTS = Path(__file__).resolve().parent / "weights"
 #: Upper ends (frames) of the duration bins of the transition thresholds.
 _DURATION_BINS = (8, 16, 32, 64)
@@ -78,6 +87,8 @@ class RefinementReport:
     action_inferred: bool = False
     anchors: list[int] = field(default_factory=list)
     anchor_probability: list[float] = field(default_factory=list)
+    flaw_probability: list[float] = field(default_factory=list)
+    correction_cm: list[float] = field(default_factory=list)
     anchor_scores: list[float] = field(default_factory=list)
     threshold: float | None = None
     flagged_anchors: list[int] = field(default_factory=list)
@@ -87,6 +98,7 @@ class RefinementReport:
     flagged_transitions: list[list[int]] = field(default_factory=list)
     changes: list[dict] = field(default_factory=list)
     note: str = ""
+    notes: list[str] = field(default_factory=list)
 
     @property
     def changed_frames(self) -> np.ndarray:
@@ -177,13 +189,41 @@ class Refiner:
         torch intra-op threads while refining, restored afterwards. The networks are small: on a
         2-core CPU one thread refined a 60-frame clip in 12 ms, torch's default two in 113 ms.
         None leaves torch's setting alone.
+    flaw_recognizer : FlawRecognizer, optional
+    flaw_repairer : FlawRepairer, optional
+        The learned steps; needed for ``method="learned"``.
+    method : {"learned", "concepts"}, optional
+        Default "learned" when both learned parts are given, else "concepts".
+    repair : {"typed", "select", "given", "infill"}, default="typed"
+        Learned repair: the repair for the flaw group the classifier recognises ("typed"), the
+        candidate the flaw classifier finds most real ("select"), the repair
+        network seeing the flagged frames ("given"), or in-filling them from the context ("infill").
+    change_penalty : float, default=0.01
+        With ``repair="select"``: flaw probability a candidate must gain per centimetre it moves.
+    flaw_classifier : FlawClassifier, optional
+        The kinematic flaw detector (default detector of the learned method).
+    detect : str, default="classifier"
+        Learned flaw detectors whose flags are used, joined by "+" (any of "classifier",
+        "recognizer", "correction"; see :mod:`refiner.learned_pipeline`).
+    min_run, margin : int, default=2, 2
+        A flagged run needs ``min_run`` frames above the flaw threshold; it is widened by ``margin``.
+    hysteresis : float, default=0.5
+        A flagged run extends over neighbouring frames whose score stays above this share of the threshold.
+    rigid_tolerance : float, default=0.005
+        Bone-length variation (std / mean of any bone) above which every frame is put back on the
+        clip's median bone lengths (learned method; real mocap varies by under 0.001 %).
     manifest : dict, optional
         Provenance of the weights (dataset, split, licence, hashes) and ``calibration``
         (``anchor_threshold``, ``transition_threshold`` in metres) from :meth:`calibrate`.
     """
 
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
-                 anchor_quality=None, *, skeleton: str = "humanact12", action_names=(), mode: str = "full",
+                 anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None, *,
+                 skeleton: str = "humanact12",
+                 action_names=(), mode: str = "full", method: str | None = None, repair: str = "typed",
+                 detect: str = "classifier",
+                 min_run: int = 2, margin: int = 2, rigid_tolerance: float = 0.005, change_penalty: float = 0.01,
+                 hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | None = 1, manifest: dict | None = None):
         self.recognizer = recognizer
@@ -192,6 +232,21 @@ class Refiner:
         self.transition_refiner = transition_refiner
         self.anchor_concepts = anchor_concepts
         self.anchor_quality = anchor_quality
+        self.flaw_recognizer = flaw_recognizer
+        self.flaw_repairer = flaw_repairer
+        self.flaw_classifier = flaw_classifier
+        learned = flaw_recognizer is not None and flaw_repairer is not None
+        self.method = _check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
+        if self.method == "learned" and not learned:
+            raise ValueError("method='learned' needs a `flaw_recognizer` and a `flaw_repairer`.")
+        self.repair = _check_choice("repair", repair, REPAIRS)
+        self.detect = check_detect(detect)
+        if "classifier" in self.detect.split("+") and flaw_classifier is None and learned:
+            raise ValueError(f"detect={detect!r} needs a `flaw_classifier`.")
+        self.min_run, self.margin, self.rigid_tolerance = int(min_run), int(margin), float(rigid_tolerance)
+        self.change_penalty, self.hysteresis = float(change_penalty), float(hysteresis)
+        if self.repair in ("select", "typed") and learned and flaw_classifier is None:
+            raise ValueError(f"repair={repair!r} needs a `flaw_classifier`.")
         self.quality = _check_choice("quality", quality, QUALITY)
         self.anchor_method = _check_choice("anchor_method", anchor_method, ANCHOR_METHODS)
         self.transition_method = _check_choice("transition_method", transition_method, TRANSITION_METHODS)
@@ -274,11 +329,13 @@ class Refiner:
         if self.threads is None:
             return self._refine(seq, action, mode, return_report)
         import torch
+        from threadpoolctl import threadpool_limits
 
         before = torch.get_num_threads()
         torch.set_num_threads(self.threads)
         try:
-            return self._refine(seq, action, mode, return_report)
+            with threadpool_limits(self.threads):  # under load, free BLAS threads made a call 3-12x slower
+                return self._refine(seq, action, mode, return_report)
         finally:
             torch.set_num_threads(before)
 
@@ -289,7 +346,9 @@ class Refiner:
             if seq.skeleton != self.skeleton:
                 raise ValueError(f"this refiner is for skeleton {self.skeleton!r}; got a {seq.skeleton!r} motion.")
             act = seq.action if action is None else action
-            out, report = self._refine_clip(seq.joints, act, mode)
+            outs, reports = (self._refine_learned(seq.joints[None], [act], mode, False) if self.method == "learned"
+                             else self._refine_each(seq.joints[None], [act], mode, False))
+            out, report = outs[0], reports[0]
             result = seq.with_joints(out)
             if result.action is None and report.action is not None:
                 result = Motion(out, skeleton=seq.skeleton, fps=seq.fps, action=report.action)
@@ -302,14 +361,11 @@ class Refiner:
         actions = action if (batched and isinstance(action, (list, tuple, np.ndarray))) else [action] * len(clips)
         if len(actions) != len(clips):
             raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
-        outs, reports = [], []
-        for i, (clip, act) in enumerate(zip(clips, actions)):
-            try:
-                o, r = self._refine_clip(clip, act, mode)
-            except ValueError as e:
-                raise ValueError(f"clip {i} of {len(clips)}: {e}") from e if batched else e
-            outs.append(o)
-            reports.append(r)
+        if self.method == "learned":
+            out, reports = self._refine_learned(clips, actions, mode, batched)
+            outs = list(out)
+        else:
+            outs, reports = self._refine_each(clips, actions, mode, batched)
         out = np.stack(outs) if batched else outs[0]
         if is_torch:
             import torch
@@ -318,6 +374,34 @@ class Refiner:
         if return_report:
             return out, (reports if batched else reports[0])
         return out
+
+    def _refine_learned(self, clips, actions, mode, batched):
+        """The whole batch through the learned steps at once (see :mod:`refiner.learned_pipeline`)."""
+        x = np.array(clips, dtype=np.float32, copy=True)
+        reports = [RefinementReport(mode=mode, n_frames=x.shape[1]) for _ in range(len(x))]
+        for i, (report, act) in enumerate(zip(reports, actions)):
+            if act is not None:
+                try:
+                    report.action = check_action(act, self.action_names)
+                except ValueError as e:
+                    raise ValueError(f"clip {i} of {len(x)}: {e}") from e if batched else e
+        if x.shape[1] < MIN_FRAMES:
+            for report in reports:
+                report.note = (f"clip has {x.shape[1]} frames; at least {MIN_FRAMES} are needed to refine, "
+                               "returned unchanged")
+            return x, reports
+        return refine_batch(self, x, [r.action for r in reports], mode, reports), reports
+
+    def _refine_each(self, clips, actions, mode, batched):
+        outs, reports = [], []
+        for i, (clip, act) in enumerate(zip(clips, actions)):
+            try:
+                o, r = self._refine_clip(clip, act, mode)
+            except ValueError as e:
+                raise ValueError(f"clip {i} of {len(clips)}: {e}") from e if batched else e
+            outs.append(o)
+            reports.append(r)
+        return outs, reports
 
     def _refine_clip(self, joints: np.ndarray, action, mode: str) -> tuple[np.ndarray, RefinementReport]:
         x = np.array(joints, dtype=np.float32, copy=True)

@@ -24,27 +24,26 @@ def test_suites_are_registered():
 
 
 @pytest.mark.real_data
-def test_bench_flaws_quick(tmp_path, capsys):
-    from conftest import shared_data_dir
+def test_flaw_records_on_a_few_clips(humanact12):
+    """The flaws bench's records on 4 held-out clips and 3 families: identity is the flaw, oracles fix it."""
+    from refiner.baselines import IdentityRefiner, SavgolRefiner
+    from refiner.bench_flaws import ORACLES, flaw_records
+    from refiner.pipeline import Refiner
 
-    assert main(["bench", "flaws", "--quick", "--data", str(shared_data_dir()), "--out", str(tmp_path)]) == 0
-    out = capsys.readouterr().out
-    assert "## Flaws (HumanAct12 subjects 11-12" in out and "severities [2]" in out
-    clean = out.split("### Change on clean clips")[1].split("###")[0]
-    identity = _row(clean, "identity")
-    assert float(identity[1]) == 0.0 and abs(float(identity[4])) < 1e-6  # identity moves nothing
-    assert float(_row(clean, "spline_fit")[1]) > float(_row(clean, "savgol")[1]) > 0.0
-    summary = out.split("### Mean over families and severities")[1].split("###")[0]
-    for name in ("identity", "savgol", "gaussian", "spline_fit"):
-        cells = _row(summary, name)
-        assert 0.5 < float(cells[1]) < 20.0 and 50.0 <= float(cells[4]) <= 100.0
-    records = json.loads((tmp_path / "flaws.json").read_text())["flawed"]
-    assert {r["family"] for r in records} == {"wrong_anchor", "anchor_drift", "transition_jitter",
-                                              "frozen_transition", "reversed_transition", "time_warp",
-                                              "foot_sliding"}
-    # the corrupted clips (identity) are off the clean ones by a measurable amount in every family
-    assert all(r["mpjpe_cm"] > 0.2 for r in records if r["refiner"] == "identity")
-    assert ("ours_full" in {r["refiner"] for r in records}) or "`ours_full` skipped" in out
+    clips = humanact12.split("test").motions[:40:10]
+    model = Refiner.pretrained("humanact12", split="train")
+    clean, records = flaw_records(clips, {"identity": IdentityRefiner(), "savgol": SavgolRefiner()},
+                                  model=model, families=["transition_jitter", "frozen_transition", "foot_sliding"])
+    assert clean[0][:3] == ["identity", 0.0, 0.0] and clean[1][1] > 0.0 and clean[1][2] == 1.0
+    by = {(r["family"], r["refiner"]): r for r in records}
+    assert {r["refiner"] for r in records} == {"identity", "savgol", *ORACLES}
+    for family in ("transition_jitter", "frozen_transition", "foot_sliding"):
+        ident = by[(family, "identity")]
+        assert ident["mpjpe_cm"] > 0.2 and ident["removed_pct"] == 0.0
+        # linear interpolation over the true flaw frames removes most of a stall or a glide
+        assert by[(family, "oracle_linear")]["mpjpe_cm"] < ident["mpjpe_cm"]
+    assert by[("transition_jitter", "savgol")]["removed_pct"] > 20.0  # a smoothing filter removes jitter
+    assert by[("frozen_transition", "oracle_linear")]["removed_pct"] > 50.0
 
 
 @pytest.mark.real_data

@@ -1,0 +1,172 @@
+"""Learned recognition and repair: tiny training on real clips, batching, windows, do-no-harm, rigid bones."""
+import numpy as np
+import pytest
+import torch
+
+from refiner.flaw_networks import FlawRepairNet, FrameTransformerConfig, linear_infill, window_starts
+from refiner.learned_pipeline import flag_runs, rigid_skeleton
+from refiner.physics import bone_length_variation
+from refiner.pipeline import Refiner
+from refiner.skeletons import joint_bone_lengths, with_bone_lengths
+
+SHIPPED_TRAIN = Refiner.pretrained.__globals__["_WEIGHTS"] / "humanact12-train"
+
+
+@pytest.fixture(scope="module")
+def tiny_learned(humanact12, tmp_path_factory):
+    """Both learned parts trained with the tiny configuration on 72 real clips, installed beside the shipped parts."""
+    from refiner.learned_training import train_learned_refiner
+
+    pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[::15][:6]]  # many subjects
+    out = tmp_path_factory.mktemp("tiny_learned")
+    refiner = train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN)
+    return refiner, out
+
+
+@pytest.mark.real_data
+def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
+    from refiner.learned_training import train_learned
+
+    refiner, out = tiny_learned
+    assert refiner.method == "learned" and 0.05 <= refiner.flaw_recognizer.threshold_ <= 0.99
+    assert 0 < refiner.flaw_repairer.correction_threshold_ < 1.0  # metres
+    assert 0.05 <= refiner.flaw_classifier.threshold_ <= 0.999 and refiner.detect == "classifier"
+    assert refiner.manifest["learned"]["flaw_threshold"] == pytest.approx(refiner.flaw_recognizer.threshold_)
+    again = Refiner.load(out)
+    x = humanact12[10].joints[:50]
+    np.testing.assert_allclose(again.flaw_recognizer.predict(x[None])["flaw"],
+                               refiner.flaw_recognizer.predict(x[None])["flaw"], atol=1e-3)  # float16 weights
+    before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
+    parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
+    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer"}
+    assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
+
+
+@pytest.mark.real_data
+def test_batch_equals_single_and_long_clips_use_windows(tiny_learned, humanact12, one_torch_thread):
+    refiner, _ = tiny_learned
+    rec = refiner.flaw_recognizer
+    clips = np.stack([humanact12[i].joints[:40] for i in (3, 50, 400)])
+    batch = rec.predict(clips, [0, None, 5])
+    for i, a in enumerate([0, None, 5]):
+        single = rec.predict(clips[i : i + 1], [a])
+        np.testing.assert_allclose(batch["flaw"][i], single["flaw"][0], atol=1e-5)
+    assert batch["flaw"].shape == (3, 40) and batch["action"].shape == (3, 12)
+    assert ((batch["flaw"] >= 0) & (batch["flaw"] <= 1)).all()
+    np.testing.assert_allclose(batch["action"].sum(1), 1.0, atol=1e-5)
+    long = humanact12[int(np.argmax([m.n_frames for m in humanact12]))].joints
+    assert len(long) > 3 * rec.window
+    p = rec.predict(long[None])["flaw"]
+    assert p.shape == (1, len(long)) and np.isfinite(p).all()
+    suspect = np.zeros((1, len(long)), bool)
+    suspect[0, 100:120] = True
+    fixed = refiner.flaw_repairer.repair(long[None], suspect)
+    assert fixed.shape == (1,) + long.shape and np.isfinite(fixed).all()
+    calm = Refiner.load(tiny_learned[1])
+    calm.flaw_recognizer.threshold_ = 1.0  # nothing can be flagged: a long clip comes back bit for bit
+    calm.flaw_repairer.correction_threshold_ = np.inf
+    calm.flaw_classifier.threshold_ = 1.0
+    np.testing.assert_array_equal(calm.refine(long), long)
+
+
+def test_untrained_repair_is_identity_or_linear_infill(rng):
+    """Zero-initialised output: an untrained repair network keeps given frames and linearly in-fills hidden ones."""
+    net = FlawRepairNet(FrameTransformerConfig(n_joints=24, n_actions=3, d_model=16, n_layers=1, n_heads=2,
+                                               ffn_dim=16, dropout=0.0)).eval()
+    x = rng.normal(size=(2, 30, 24, 3)).astype(np.float32)
+    suspect = np.zeros((2, 30), bool)
+    suspect[:, 10:18] = True
+    infill = np.stack([linear_infill(c, s) for c, s in zip(x, suspect)])
+    args = [torch.from_numpy(v) for v in (x, infill, suspect, np.zeros_like(suspect))]
+    with torch.no_grad():
+        out = net(*args, torch.tensor([0, 3]))
+        hidden = net(args[1], args[1], args[2], args[2], torch.tensor([0, 3]))
+    gate = torch.sigmoid(torch.tensor(4.0)).item()
+    np.testing.assert_allclose(out.numpy()[:, ~suspect[0]], x[:, ~suspect[0]], atol=1e-5)
+    mixed = gate * x + (1 - gate) * infill  # the root gate and the pose gates mix alike at initialisation
+    np.testing.assert_allclose(out.numpy()[:, 10:18], mixed[:, 10:18], atol=1e-4)
+    np.testing.assert_allclose(hidden.numpy(), infill, atol=1e-5)
+    line = linear_infill(np.arange(10, dtype=np.float32)[:, None, None].repeat(2, 1).repeat(3, 2),
+                         np.array([0, 0, 1, 1, 1, 0, 0, 0, 1, 1], bool))
+    np.testing.assert_allclose(line[:, 0, 0], [0, 1, 2, 3, 4, 5, 6, 7, 7, 7])
+
+
+def test_flag_runs_and_windows():
+    p = np.array([0, 0.9, 0, 0, 0.8, 0.9, 0.95, 0, 0, 0, 0, 0.7, 0.8, 0, 0, 0, 0, 0, 0, 0.9])
+    assert flag_runs(p, 0.5, min_run=2, margin=1) == [(3, 8), (10, 14)]  # single frames are not flagged
+    assert flag_runs(p, 0.5, min_run=1, margin=0) == [(1, 2), (4, 7), (11, 13), (19, 20)]
+    assert flag_runs(p, 0.5, min_run=2, margin=3) == [(1, 16)]  # widened runs merge
+    assert flag_runs(np.zeros(10), 0.5) == []
+    assert window_starts(50, 64, 32) == [0]
+    assert window_starts(130, 64, 32) == [0, 32, 64, 66]
+
+
+@pytest.mark.real_data
+def test_rigid_skeleton_restores_stretched_bones(humanact12, rng):
+    clip = humanact12[20].joints.astype(np.float64)
+    lengths = joint_bone_lengths(clip, "humanact12")
+    stretched = with_bone_lengths(clip, lengths * rng.uniform(0.9, 1.1, size=lengths.shape), "humanact12")
+    assert bone_length_variation(stretched) > 0.03
+    fixed, variation = rigid_skeleton(stretched, "humanact12", 0.005)
+    assert variation > 0.03 and bone_length_variation(fixed) < 1e-3  # from 6 % to under 0.1 %
+    # the lengths are restored without carrying corrections down the chains: closer to the real clip
+    err = lambda a: np.linalg.norm(a - clip, axis=-1).mean()  # noqa: E731
+    assert err(fixed) < err(stretched)
+    same, v = rigid_skeleton(clip, "humanact12", 0.005)
+    assert same is clip and v < 1e-4  # real mocap is rigid: nothing to do
+
+
+@pytest.mark.real_data
+def test_learned_refiner_does_no_harm_and_reports(tiny_learned, humanact12):
+    refiner, out = tiny_learned
+    forced = Refiner.load(out, detect="classifier+recognizer+correction")
+    forced.flaw_recognizer.threshold_ = forced.flaw_classifier.threshold_ = 1e-6  # flag every frame
+    clip = humanact12[700]
+    before = clip.numpy()
+    result, report = forced.refine(clip, return_report=True)
+    np.testing.assert_array_equal(clip.joints, before)
+    changed = report.changed_frames
+    assert changed.any() and report.changes[0]["reason"].startswith("flagged: kinematic flaw probability")
+    assert len(report.correction_cm) == clip.n_frames
+    np.testing.assert_array_equal(result.joints[~changed], clip.joints[~changed])
+    assert len(report.flaw_probability) == clip.n_frames and report.action == clip.action
+    # a batch of torch clips comes back as torch, clip by clip like single calls; actions inferred
+    batch = torch.from_numpy(np.stack([humanact12[i].joints[:30] for i in (5, 6)]))
+    out_b, reports = forced.refine(batch, return_report=True)
+    assert isinstance(out_b, torch.Tensor) and out_b.shape == batch.shape and all(r.action_inferred for r in reports)
+    single = forced.refine(batch[1].numpy())
+    np.testing.assert_allclose(out_b[1].numpy(), single, atol=1e-5)
+    # stretching bones in generator output come back rigid, and the report says so
+    lengths = joint_bone_lengths(before, "humanact12")
+    wobbly = with_bone_lengths(before, lengths * np.random.default_rng(0).uniform(0.9, 1.1, lengths.shape),
+                               "humanact12").astype(np.float32)
+    fixed, rep = refiner.refine(wobbly, action=clip.action, return_report=True)
+    assert bone_length_variation(fixed) < 1e-3 and rep.changes[0]["step"] == "skeleton"
+    with pytest.raises(ValueError, match="repair"):
+        Refiner.load(out, repair="nope")
+    with pytest.raises(ValueError, match="unknown detect"):
+        Refiner.load(out, detect="classifier+magic")
+    for repair in ("select", "given", "infill"):  # the other repair strategies run and keep unflagged frames
+        other = Refiner.load(out, repair=repair)
+        other.flaw_classifier.threshold_ = 1e-6
+        res, rep = other.refine(clip, return_report=True)
+        assert res.joints.shape == clip.joints.shape and np.isfinite(res.joints).all()
+        np.testing.assert_array_equal(res.joints[~rep.changed_frames], clip.joints[~rep.changed_frames])
+
+
+@pytest.mark.real_data
+def test_train_cli_learned_tiny(tmp_path, capsys):
+    from conftest import shared_data_dir
+
+    from refiner.cli import main
+
+    data = shared_data_dir() / "humanact12" / "humanact12_joints.npz"
+    args = ["train", "--learned", "--config", "tiny", "--device", "cpu", "--data", str(data), "--split", "train",
+            "--out", str(tmp_path), "--base", str(SHIPPED_TRAIN)]
+    assert main(args + ["--only", "flaw_repairer"]) == 0
+    assert (tmp_path / "parts" / "flaw_repairer.safetensors").is_file()
+    assert not (tmp_path / "manifest.json").exists()
+    assert main(args) == 0
+    assert "learned steps added" in capsys.readouterr().out
+    model = Refiner.load(tmp_path)
+    assert model.method == "learned" and model.manifest["learned"]["split"] == "train"
