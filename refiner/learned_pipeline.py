@@ -26,7 +26,7 @@ import numpy as np
 from refiner.recognition import _peaks
 from refiner.repair_candidates import CANDIDATES
 from refiner.training_flaws import GROUPS
-from refiner.skeletons import bone_lengths, get_skeleton, joint_bone_lengths, with_bone_lengths
+from refiner.skeletons import bone_lengths, get_skeleton
 
 __all__ = ["flag_runs", "refine_batch", "rigid_skeleton", "check_detect", "REPAIRS", "DETECTORS"]
 
@@ -40,7 +40,7 @@ _GROUP_NAMES = tuple(GROUPS)
 #: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many
 #: frames its window is widened on each side (a stall spans a whole transition; the detector may
 #: see only part of it).
-#: Chosen by measurement on the calibration subjects 9-10 of the train split (synthetic
+#: Chosen by measurement (``examples/measure_typed_repairs.py``) on the calibration subjects 9-10 of the train split (synthetic
 #: training flaws of each group plus the benchmark's training families; never its held-out ones):
 #: MPJPE removed, summed over the runs the classifier put in each group, best candidate vs "keep":
 #: timing 246 runs, retime -70.5 cm (widened by 4: -55.8; network -5.1); root 258 runs, network
@@ -60,6 +60,8 @@ def check_detect(detect: str) -> str:
     if not detect or any(n not in DETECTORS for n in names):
         raise ValueError(f"unknown detect {detect!r}; use one or more of {', '.join(DETECTORS)} joined by '+'.")
     return detect
+
+
 _ANCHOR_THRESHOLD = 0.3
 #: Frames on each side of a run that the selection's flaw score also covers (the seams).
 _SCORE_CONTEXT = 4
@@ -187,7 +189,7 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, root):
 
 def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
-    from refiner.pipeline import _reference_lengths, project_bone_lengths, splice
+    from refiner.pipeline import _reference_lengths, project_bone_lengths
 
     clips = clips.copy()
     for b, report in enumerate(reports):  # first the bones: a stretching skeleton is not a motion flaw

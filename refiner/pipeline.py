@@ -318,7 +318,8 @@ class Refiner:
         return _PRETRAINED[key]
 
     def n_parameters(self) -> dict:
-        counts = {name: getattr(self, name).n_parameters() for name in _PARTS if name not in _NO_DEVICE}
+        counts = {name: getattr(self, name).n_parameters() for name in _PARTS
+                  if name not in _NO_DEVICE and getattr(self, name) is not None}
         counts["total"] = sum(counts.values())
         return counts
 

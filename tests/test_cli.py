@@ -51,10 +51,9 @@ def test_bench_refiner_and_speed_quick(capsys, tmp_path):
 @pytest.mark.real_data
 @pytest.mark.slow
 def test_bench_generators_quick(capsys):
-    """The generator benchmark (reference generators and the real A2M samples, before/after) runs tiny."""
+    """The generator benchmark (reference generators before/after) runs tiny."""
     from conftest import shared_data_dir
 
     assert main(["bench", "generators", "--quick", "--data", str(shared_data_dir())]) == 0
     out = capsys.readouterr().out
     assert "| a2m | refined |" in out and "| actor | generated |" in out
-    assert "Real Action2Motion xyz-VAE samples (20 clips" in out

@@ -170,3 +170,39 @@ def test_train_cli_learned_tiny(tmp_path, capsys):
     assert "learned steps added" in capsys.readouterr().out
     model = Refiner.load(tmp_path)
     assert model.method == "learned" and model.manifest["learned"]["split"] == "train"
+
+
+@pytest.mark.real_data
+def test_flaw_features_see_what_flaws_break(humanact12):
+    """Kinematic evidence: batch and single clip agree; jitter raises the residual, stretching the bone deviation."""
+    from refiner.flaw_features import N_FEATURES, flaw_features
+
+    clip = next(m for m in humanact12 if m.n_frames >= 50).joints[:50].astype(np.float64)
+    batch = flaw_features(np.stack([clip, clip[::-1]]))
+    assert batch.shape == (2, 50, N_FEATURES) and np.isfinite(batch).all()
+    np.testing.assert_allclose(flaw_features(clip), batch[0], rtol=1e-5, atol=1e-5)
+    noisy = clip + np.random.default_rng(0).normal(scale=0.02, size=clip.shape)
+    assert flaw_features(noisy)[:, 6].mean() > 3 * flaw_features(clip)[:, 6].mean()  # jitter residual
+    lengths = joint_bone_lengths(clip, "humanact12")
+    long_arm = lengths.copy()
+    long_arm[20:, 18] *= 1.3  # left elbow -> wrist bone 30 % longer from frame 20 on
+    stretched = with_bone_lengths(clip, long_arm, "humanact12")
+    assert flaw_features(stretched)[:, 9].max() > 10 * flaw_features(clip)[:, 9].max()  # bone deviation
+    with pytest.raises(ValueError, match="T >= 4"):
+        flaw_features(clip[:3])
+
+
+@pytest.mark.real_data
+def test_flaw_classifier_tiny_fit_and_calibration(tiny_learned, humanact12):
+    refiner, _ = tiny_learned
+    clf = refiner.flaw_classifier
+    x = np.stack([humanact12[i].joints[:40] for i in (1, 2, 3)])
+    every = clf.predict_all(x)
+    assert every.shape == (3, 40, 5) and ((every >= 0) & (every <= 1)).all()  # flaw + 4 flaw groups
+    np.testing.assert_allclose(clf.predict(x), every[..., 0])
+    clips = [humanact12[i].joints for i in range(40, 60)]
+    th = clf.calibrate(clips, clip_rate=0.1)
+    from refiner.learned_refinement import _run_peak
+
+    flagged = np.mean([_run_peak(clf.predict(c[None])[0], 2) > th for c in clips])
+    assert th == clf.threshold_ and flagged <= 0.1 + 1e-9  # at most the asked share of clean clips
