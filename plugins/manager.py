@@ -101,9 +101,22 @@ class PluginManager(pluggy.PluginManager):
             return name
         return None
 
+    def owner_hook(self, adapter: str, hook: str):
+        """The hook caller of *hook* restricted to the plugin that registered adapter *adapter*, so that
+        another plugin answering for every name cannot take over a built-in (or any other) adapter."""
+        owner = None
+        for impl in self.hook.refiner_adapter_info.get_hookimpls():
+            info = _call_isolated(impl, {}, "refiner_adapter_info", quiet=True)
+            if info is not None and info.name == adapter:
+                owner = impl.plugin
+                break
+        others = [p for p in self.get_plugins() if p is not owner]
+        return self.subset_hook_caller(hook, remove_plugins=others)
+
     def sample(self, adapter: str, generator: Any, action: Any, n: int, options: Mapping[str, Any]) -> Any:
-        """Raw output from the ``refiner_sample_generator`` hook, or None when no plugin implements it."""
-        return self.hook.refiner_sample_generator(
+        """Raw output from the ``refiner_sample_generator`` hook of the plugin that registered *adapter*,
+        or None when it does not implement it."""
+        return self.owner_hook(adapter, "refiner_sample_generator")(
             adapter=adapter, generator=generator, action=action, n=n, options=dict(options)
         )
 
@@ -131,7 +144,7 @@ class PluginManager(pluggy.PluginManager):
             raise ValueError(
                 f"adapter {adapter!r} cannot produce skeleton {skeleton!r}; it produces: {', '.join(info.skeletons)}."
             )
-        motions = self.hook.refiner_convert_output(
+        motions = self.owner_hook(adapter, "refiner_convert_output")(
             adapter=adapter, output=output, generator=generator, skeleton=skeleton, options=dict(options or {})
         )
         if motions is None:

@@ -276,3 +276,30 @@ def test_import_refiner_stays_cheap():
             "'refiner.plugins', 'smplx', 'pluggy'))]; print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_a_plugin_answering_for_every_name_cannot_take_over_a_builtin():
+    """The manager calls the plugin registered under the requested adapter name, and only that one."""
+    from refiner.motion import Motion
+
+    pm = get_plugin_manager(autoload=False)
+
+    class Greedy:
+        @hookimpl(tryfirst=True)
+        def refiner_adapter_info(self):
+            return AdapterInfo("greedy", "anything", ("humanact12",))
+
+        @hookimpl(tryfirst=True)
+        def refiner_convert_output(self, adapter, output):  # no name filter: answers for everyone
+            return [Motion(np.zeros((60, 24, 3)))]
+
+        @hookimpl(tryfirst=True)
+        def refiner_sample_generator(self, adapter, generator, action, n):
+            return "hijacked"
+
+    pm.register(Greedy(), name="greedy")
+    raw = np.random.default_rng(0).normal(size=(1, 60, 72)).astype(np.float32) * 0.1
+    out = pm.convert("action2motion", raw, options={"representation": "xyz"})
+    assert np.abs(out[0].joints).max() > 0  # the built-in converted it, not the greedy plugin's zeros
+    assert pm.convert("greedy", raw)[0].joints.max() == 0.0
+    assert pm.sample("action2motion", object(), 0, 1, {}) != "hijacked"
