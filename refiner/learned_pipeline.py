@@ -12,9 +12,9 @@
    frames are flagged, widened by ``margin`` frames of context on each side.
 2. **Anchor and transition refinement**: each flagged run gets the repair for the flaw group the
    classifier recognises in it (``repair="typed"``, :data:`TYPED_REPAIRS`): timing flaws are re-timed
-   along their own path (:mod:`refiner.repair_candidates`), root flaws corrected and pose flaws
-   in-filled by the repair network (:class:`~refiner.learned_refinement.FlawRepairer`, one forward
-   pass for the batch), noise smoothed. Only the flagged runs are spliced in (displacement zero at the kept
+   along their own path (:mod:`refiner.repair_candidates`), root and pose flaws corrected by the
+   repair network (:class:`~refiner.learned_refinement.FlawRepairer`, one forward pass for the
+   batch), noise smoothed. Only the flagged runs are spliced in (displacement zero at the kept
    frames, smoothstep taper), and changed frames go back on the input's bone lengths. A run that
    contains a recognised anchor is reported as an anchor refinement, the others as transition
    refinements.
@@ -40,14 +40,13 @@ _GROUP_NAMES = tuple(GROUPS)
 #: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many
 #: frames its window is widened on each side (a stall spans a whole transition; the detector may
 #: see only part of it).
-#: Chosen by measurement (``examples/measure_typed_repairs.py``) on the calibration subjects 9-10 of the train split (synthetic
-#: training flaws of each group plus the benchmark's training families; never its held-out ones):
-#: MPJPE removed, summed over the runs the classifier put in each group, best candidate vs "keep":
-#: timing 246 runs, retime -70.5 cm (widened by 4: -55.8; network -5.1); root 258 runs, network
-#: -132.0 (smooth -4.1); pose 27 runs, network in-fill -22.1 (network -19.6); noise 3 runs, smoothing
-#: widened by 8 -0.9 (network -0.4).
-TYPED_REPAIRS = {"timing": ("retime", 0), "root": ("network", 0), "pose": ("network_infill", 0),
-                 "noise": ("smooth", 8)}
+#: Chosen by measurement (``examples/measure_typed_repairs.py``) on the calibration subjects 9-10 of
+#: the train split (synthetic training flaws of each group plus the benchmark's training families;
+#: never its held-out ones): MPJPE removed, summed over the runs the classifier put in each group,
+#: best candidate vs "keep": timing 248 runs, retime -74.4 cm (widened by 4: -59.4; network -5.5);
+#: root 223 runs, network -126.9 (smooth -0.7); pose 28 runs, network -16.5 (in-fill -2.5); noise 1
+#: run, smoothing widened by 4 -0.0 (a tie with keeping it).
+TYPED_REPAIRS = {"timing": ("retime", 0), "root": ("network", 0), "pose": ("network", 0), "noise": ("smooth", 4)}
 #: Detectors that can flag frames (``detect="classifier+recognizer"`` takes the union): the kinematic
 #: flaw classifier, the recognition network's flaw probability, the repair network's correction of
 #: the whole clip (how far it would move each frame).
