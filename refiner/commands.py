@@ -161,12 +161,12 @@ def refine_run(args: argparse.Namespace) -> int:
     if pm is not None:
         pm.get_adapter(args.adapter)  # an unknown adapter is a usage error, not a per-file failure
 
-    failed, done = [], 0
+    failed, done, changed_total, frames_total = [], 0, 0, 0
     bar = tqdm(list(zip(inputs, targets)), desc="refine", unit="file", disable=len(inputs) == 1)
     for path, target in bar:
         bar.set_postfix_str(path.name)
         try:
-            written = _refine_file(path, target, args, refiner, pm, skeleton, options)
+            written, changed, frames = _refine_file(path, target, args, refiner, pm, skeleton, options)
         except (ValueError, TypeError, OSError) as e:
             failed.append(path)
             tqdm.write(f"FAILED {path}: {e}", file=sys.stderr)
@@ -176,9 +176,10 @@ def refine_run(args: argparse.Namespace) -> int:
             tqdm.write(f"FAILED {path}: unexpected {type(e).__name__}: {e}\n{traceback.format_exc()}", file=sys.stderr)
             continue
         done += 1
-        tqdm.write(f"refined {path} -> {', '.join(str(w) for w in written)}")
-    print(f"refined {done} of {len(inputs)} file(s)" + (f"; {len(failed)} failed: " + ", ".join(p.name for p in failed)
-                                                         if failed else ""))
+        changed_total, frames_total = changed_total + changed, frames_total + frames
+        tqdm.write(f"refined {path} -> {', '.join(str(w) for w in written)} ({changed} of {frames} frames changed)")
+    print(f"refined {done} of {len(inputs)} file(s), {changed_total} of {frames_total} frames changed"
+          + (f"; {len(failed)} failed: " + ", ".join(p.name for p in failed) if failed else ""))
     return 1 if failed else 0
 
 
@@ -240,8 +241,8 @@ def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12"
     return motions, batched
 
 
-def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, options: dict) -> list[Path]:
-    """Refine one file and write its outputs; returns the paths written."""
+def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, options: dict):
+    """Refine one file and write its outputs; returns ``(paths written, frames changed, frames)``."""
     if target.resolve() == path.resolve():
         raise ValueError("the output would replace the input; choose another -o.")
     motions, batched = load_input(path, adapter=args.adapter, skeleton=skeleton, options=options, fps=args.fps,
@@ -296,7 +297,8 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
         for s, after in zip(per_clip, refined):
             save_bvh(after, Path(f"{stem}{s}.bvh"), translations=True)
             written.append(Path(f"{stem}{s}.bvh"))
-    return written
+    changed = sum(int(r.changed_frames.sum()) for r in reports)
+    return written, changed, sum(r.n_frames for r in reports)
 
 
 def _read_array_file(path: Path, *, want_dict: bool):

@@ -197,7 +197,7 @@ def format_table(rows: Sequence[DemoRow]) -> str:
     if rows:
         mean_b = np.mean([r.confidence_before for r in rows])
         mean_a = np.mean([r.confidence_after for r in rows])
-        lines.append(f"| **mean** | {sum(r.frames_changed for r in rows)} | "
+        lines.append(f"| **total; mean confidence** | {sum(r.frames_changed for r in rows)}/{sum(r.frames for r in rows)} | "
                      f"{sum(r.flagged_anchors for r in rows)}/{sum(r.anchors for r in rows)} | {mean_b:.3f} | "
                      f"{mean_a:.3f} | | |")
     return "\n".join(lines)

@@ -104,3 +104,13 @@ def test_demo_rejects_unknown_generator_and_action(tmp_path):
         run_demo(tmp_path, actions=["fly"])
     with pytest.raises(ValueError, match="unknown reference generator"):
         run_demo(tmp_path, generator="mdm")
+
+
+def test_summary_row_says_total_for_counts_and_mean_for_confidence():
+    from refiner.demo import DemoRow, format_table
+
+    rows = [DemoRow(action=a, action_name=n, frames=60, frames_changed=c, anchors=3, flagged_anchors=1,
+                    confidence_before=b, confidence_after=b, predicted_before=n, predicted_after=n, files=[])
+            for a, n, c, b in ((0, "warm_up", 59, 0.2), (1, "walk", 0, 0.6))]
+    last = format_table(rows).splitlines()[-1]
+    assert last.startswith("| **total; mean confidence** | 59/120 | 2/6 | 0.400 | 0.400 |")
