@@ -149,6 +149,11 @@ def refine_run(args: argparse.Namespace) -> int:
         if args.out.suffix.lower() in _SUFFIXES:
             raise ValueError(f"IN is a folder, so `-o` must be a folder; got the file name {str(args.out)!r}.")
         targets = [args.out / (p.stem + ".npy") for p in inputs]
+        clashes = sorted({t.name for t in targets if targets.count(t) > 1})
+        if clashes:  # refuse before writing anything: a second file would overwrite the first's result
+            names = ", ".join(p.name for p, t in zip(inputs, targets) if t.name in clashes)
+            raise ValueError(f"these inputs would all be written to the same output ({', '.join(clashes)}): "
+                             f"{names}; rename them or refine them one by one.")
     elif args.input.is_file():
         if args.input.suffix.lower() not in _SUFFIXES:
             raise ValueError(f"IN must be a .npy or .npz file or a folder; got {str(args.input)!r}.")

@@ -341,12 +341,13 @@ class Refiner:
             torch.set_num_threads(before)
 
     def _refine(self, seq, action, mode, return_report):
-        mode = _check_mode(mode or self.mode)
+        mode = _check_mode(self.mode if mode is None else mode)
         skel = get_skeleton(self.skeleton)
         if isinstance(seq, Motion):
             if seq.skeleton != self.skeleton:
                 raise ValueError(f"this refiner is for skeleton {self.skeleton!r}; got a {seq.skeleton!r} motion.")
             act = seq.action if action is None else action
+            _check_metres(seq.joints, get_skeleton(seq.skeleton))
             outs, reports = (self._refine_learned(seq.joints[None], [act], mode, False) if self.method == "learned"
                              else self._refine_each(seq.joints[None], [act], mode, False))
             out, report = outs[0], reports[0]
@@ -358,6 +359,7 @@ class Refiner:
         ndim = len(getattr(seq, "shape", np.shape(seq)))
         batched = ndim == 4
         x = check_joints(seq, skeleton=skel, batched=batched)
+        _check_metres(x, skel)
         clips = x if batched else x[None]
         actions = action if (batched and isinstance(action, (list, tuple, np.ndarray))) else [action] * len(clips)
         if len(actions) != len(clips):
@@ -627,6 +629,17 @@ def _reference_lengths(x: np.ndarray, skeleton: str) -> np.ndarray:
     median = np.median(lengths, axis=0)
     rigid = lengths.std(0) < 0.02 * np.maximum(median, 1e-9)
     return np.where(rigid, median, lengths)
+
+
+def _check_metres(x: np.ndarray, skel) -> None:
+    """Refuse joints that cannot be metres: huge values, or bones metres long (centimetres given)."""
+    extent = float(np.abs(x).max())
+    if extent > 1e3:
+        raise ValueError(f"`seq` has coordinates up to {extent:.3g}; joints must be in metres (|x| < 1000).")
+    median = float(np.median(skel.bone_lengths(x)))
+    if median > 1.5:
+        raise ValueError(f"`seq` has bones of {median:.3g} units median length; joints must be in metres "
+                         "(centimetres: divide by 100).")
 
 
 def _check_choice(name: str, value: str, choices) -> str:

@@ -33,6 +33,8 @@ def to_numpy(x, *, name: str = "seq") -> np.ndarray:
         raise ValueError(f"`{name}` must be convertible to a numeric array; got {type(x).__name__}: {e}") from e
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
         raise ValueError(f"`{name}` must hold numbers; got dtype {arr.dtype}.")
+    if np.issubdtype(arr.dtype, np.complexfloating):  # casting would silently drop the imaginary part
+        raise ValueError(f"`{name}` must hold real numbers; got dtype {arr.dtype}.")
     return arr
 
 

@@ -111,3 +111,15 @@ def test_usage_errors(tmp_path, capsys):
     assert "unknown adapter 'nope'" in capsys.readouterr().err
     assert main(["refine", str(tmp_path), "-o", str(tmp_path / "o.npy")]) == 2
     assert "must be a folder" in capsys.readouterr().err
+
+
+@pytest.mark.real_data
+def test_inputs_that_would_share_an_output_are_refused_before_writing(clip, tmp_path, capsys):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    np.save(folder / "clip.npy", clip)
+    np.savez(folder / "clip.npz", joints=clip)
+    out = tmp_path / "out"
+    code = main(["refine", str(folder), "-o", str(out), "--force"])
+    assert code == 2 and "same output (clip.npy)" in capsys.readouterr().err
+    assert not out.exists() or not any(out.iterdir())  # nothing written, so nothing lost

@@ -164,3 +164,17 @@ def test_shipped_weights_refine_a_60_frame_clip(humanact12):
     assert set(bench.manifest["calibration"]) >= {"anchor_threshold", "transition_thresholds"}
     with pytest.raises(ValueError, match="no shipped weights"):
         Refiner.pretrained("uestc")
+
+
+@pytest.mark.real_data
+@pytest.mark.parametrize("change, match", [
+    (lambda x: x * 100.0, "metres"),                         # centimetres
+    (lambda x: x + 1e20, "coordinates up to"),               # finite but absurd
+    (lambda x: x.astype(np.complex64) + 1j, "real numbers"),  # an imaginary part would be dropped
+])
+def test_inputs_that_cannot_be_metres_are_refused(humanact12, change, match):
+    clip = humanact12[100].joints[:40]
+    with pytest.raises(ValueError, match=match):
+        refine(change(clip))
+    with pytest.raises(ValueError, match="unknown mode ''"):
+        refine(clip, mode="")  # an empty mode is a mistake, not "full"
