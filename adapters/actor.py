@@ -21,6 +21,7 @@ import numpy as np
 from refiner.adapters.base import AdapterInfo, call_with_options, check_raw, resolve_path, rot6d_to_rotmat
 from refiner.motion import Motion
 from refiner.plugins import hookimpl
+from refiner.safe_pickle import load_pickle
 from refiner.validation import to_numpy
 
 __all__ = [
@@ -61,12 +62,16 @@ def load_smpl(smpl_path=None):
     Parameters
     ----------
     smpl_path : path, optional
-        ``SMPL_NEUTRAL.pkl`` or a folder holding it; default ``$MOTION_REFINER_SMPL``.
+        ``SMPL_NEUTRAL.pkl`` (or an ``.npz`` of the same arrays) or a folder holding it; default
+        ``$MOTION_REFINER_SMPL``. The file is read without running code from it: a ``.pkl`` may hold
+        only numpy arrays, scipy sparse matrices and chumpy arrays (read as their values, chumpy is
+        not needed), an ``.npz`` is read with ``allow_pickle=False``.
 
     Raises
     ------
     ValueError
-        No path given, file missing, or not a usable SMPL model file.
+        No path given, file missing, a pickle naming anything else (nothing it names is called), or
+        not a usable SMPL model file.
     """
     path = resolve_path(smpl_path, param="smpl_path", env=SMPL_ENV, what="the SMPL neutral model file",
                         default_name="SMPL_NEUTRAL.pkl")
@@ -78,18 +83,34 @@ def load_smpl(smpl_path=None):
 def _load_smpl_cached(path: str, mtime_ns: int, size: int):
     """Build the layer once per file version (the cache key includes mtime and size)."""
     import smplx
+    from smplx.utils import Struct
 
+    data = _read_smpl_arrays(path)
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # smplx prints a notice about 10 betas
-            layer = smplx.SMPLLayer(model_path=path)
-    except ModuleNotFoundError as e:
-        raise ValueError(
-            f"SMPL model file {path!r} needs the module {e.name!r} to unpickle (original SMPL files store "
-            f"chumpy arrays); install it or re-save the file with plain numpy arrays."
-        ) from e
-    except Exception as e:  # noqa: BLE001 -- smplx raises KeyError/AttributeError/pickle errors on bad files
+            layer = smplx.SMPLLayer(model_path=path, data_struct=Struct(**data))
+    except Exception as e:  # noqa: BLE001 -- smplx raises KeyError/AttributeError/IndexError on missing arrays
         raise ValueError(f"{path!r} is not a usable SMPL model file: {type(e).__name__}: {e}") from e
     return layer.eval()
+
+
+def _read_smpl_arrays(path: str) -> dict:
+    """The arrays of an SMPL model file, never running code from it (smplx itself would ``pickle.load`` it).
+
+    A ``.npz`` is read with ``allow_pickle=False``; a ``.pkl`` through the restricted unpickler (numpy
+    arrays, scipy sparse matrices, chumpy arrays as their values).
+    """
+    if path.endswith(".npz"):
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except Exception as e:  # noqa: BLE001 -- a bad zip or an object array
+            raise ValueError(f"{path!r} is not a usable SMPL model file: {type(e).__name__}: {e}") from e
+    else:
+        data = load_pickle(path, what="a usable SMPL model file", sparse=True, chumpy=True)
+    if not isinstance(data, dict):
+        raise ValueError(f"{path!r} is not a usable SMPL model file: it holds a {type(data).__name__}, not a dict.")
+    return data
 
 
 def rot6d_to_joints(

@@ -7,7 +7,6 @@ working directory.
 from __future__ import annotations
 
 import os
-import pickle
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,6 +15,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from refiner.motion import Motion
+from refiner.safe_pickle import load_pickle
 
 __all__ = [
     "HUMANACT12_ACTIONS",
@@ -250,28 +250,8 @@ def _humanact12_from_folder(path: Path) -> MotionDataset:
     return _make_dataset(names, clips, None)
 
 
-class _ArrayUnpickler(pickle.Unpickler):
-    """Unpickles plain containers of numpy arrays and nothing else (no code from the file runs)."""
-
-    _ALLOWED = {
-        ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy.core.multiarray", "_reconstruct"),
-        ("numpy._core.multiarray", "_reconstruct"), ("numpy.core.multiarray", "scalar"),
-        ("numpy._core.multiarray", "scalar"), ("numpy", "int64"), ("numpy", "float32"),
-        ("numpy", "float64"), ("numpy", "int32"),
-    }
-
-    def find_class(self, module, name):
-        if (module, name) in self._ALLOWED:
-            return super().find_class(module, name)
-        raise pickle.UnpicklingError(f"refusing to load {module}.{name} from a data file")
-
-
 def _humanact12_from_pkl(path: Path, names: Sequence[str] | None) -> MotionDataset:
-    try:
-        with open(path, "rb") as f:
-            data = _ArrayUnpickler(f).load()
-    except (pickle.UnpicklingError, EOFError, AttributeError) as e:
-        raise ValueError(f"{str(path)!r} is not an ACTOR humanact12poses.pkl of arrays: {e}") from e
+    data = load_pickle(path, what="an ACTOR humanact12poses.pkl of arrays")
     if not isinstance(data, dict) or "joints3D" not in data or "y" not in data:
         raise ValueError(f"{str(path)!r} must hold a dict with keys 'joints3D' and 'y'.")
     clips, labels = list(data["joints3D"]), [int(v) for v in data["y"]]

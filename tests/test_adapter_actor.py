@@ -1,10 +1,14 @@
 """ACTOR adapter: rot6d conventions and the SMPL path, on a stand-in SMPL model file of the real structure."""
 from __future__ import annotations
 
+import os
 import pickle
+import sys
+import types
 
 import numpy as np
 import pytest
+import scipy.sparse
 from scipy.spatial.transform import Rotation
 
 from refiner.adapters import actor
@@ -17,6 +21,20 @@ N_VERTS = 6890  # smplx picks keypoints up to vertex 6787, so the stand-in keeps
 
 def write_standin_smpl(folder, seed=0):
     """Write ``SMPL_NEUTRAL.pkl`` and ``J_regressor_extra.npy``: random but structurally valid SMPL arrays.
+
+    The arrays are :func:`standin_smpl_arrays`; the regressor rows are random sparse-ish weights.
+    """
+    rng = np.random.default_rng(seed + 1)
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / "SMPL_NEUTRAL.pkl", "wb") as fh:
+        pickle.dump(standin_smpl_arrays(seed), fh, protocol=2)
+    extra = rng.random((9, N_VERTS)) ** 8
+    np.save(folder / "J_regressor_extra.npy", (extra / extra.sum(1, keepdims=True)).astype(np.float32))
+    return folder
+
+
+def standin_smpl_arrays(seed=0):
+    """The arrays of an SMPL neutral model: random but structurally valid.
 
     Same keys, shapes and conventions as the real neutral model (checked against smplx's
     ``SMPL.__init__``): v_template (V, 3), shapedirs (V, 3, 10), posedirs (V, 3, 207), J_regressor
@@ -43,12 +61,7 @@ def write_standin_smpl(folder, seed=0):
         "kintree_table": kintree,
         "f": rng.integers(0, N_VERTS, size=(13776, 3)).astype(np.int64),
     }
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / "SMPL_NEUTRAL.pkl", "wb") as fh:
-        pickle.dump(model, fh, protocol=2)
-    extra = rng.random((9, N_VERTS)) ** 8
-    np.save(folder / "J_regressor_extra.npy", (extra / extra.sum(1, keepdims=True)).astype(np.float32))
-    return folder
+    return model
 
 
 @pytest.fixture(scope="session")
@@ -181,6 +194,55 @@ def test_missing_smpl_and_regressor_files(tmp_path, monkeypatch, smpl_dir, rng):
         actor.rot6d_to_joints(out, smpl_path=lone, skeleton="uestc")
     with pytest.raises(ValueError, match=r"\(9, 6890\)"):
         actor.rot6d_to_joints(out, smpl_path=lone, skeleton="uestc", j_regressor_extra=np.zeros((4, 6890)))
+
+
+class _WritesFile:
+    """Unpickling this calls ``os.system``: what a crafted SMPL file does."""
+
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (os.system, (f"touch {self.marker}",))
+
+
+def test_crafted_smpl_pickle_runs_nothing(tmp_path, rng):
+    """A .pkl whose unpickling would run a shell command is refused before anything is called."""
+    marker = tmp_path / "pwned"
+    model = standin_smpl_arrays()
+    model["v_template"] = _WritesFile(marker)
+    (tmp_path / "SMPL_NEUTRAL.pkl").write_bytes(pickle.dumps(model, protocol=2))
+    out, _ = random_actor_output(rng, batch=1, frames=4)
+    with pytest.raises(ValueError, match=r"not a usable SMPL model file: it names posix\.system"):
+        actor.rot6d_to_joints(out, smpl_path=tmp_path)
+    assert not marker.exists()
+
+
+def test_smpl_pickle_of_chumpy_and_sparse_arrays_loads_without_chumpy(tmp_path, smpl_dir, rng, monkeypatch):
+    """Original SMPL files: chumpy ``Ch`` objects (values in state 'x') and a sparse J_regressor."""
+    chumpy_ch = types.ModuleType("chumpy.ch")
+
+    class Ch:  # pickles as chumpy.ch.Ch with its __dict__ as state, as chumpy does
+        def __init__(self, x):
+            self.x, self._dirty_vars = x, set()
+
+    Ch.__module__, Ch.__qualname__ = "chumpy.ch", "Ch"
+    chumpy_ch.Ch = Ch
+    monkeypatch.setitem(sys.modules, "chumpy", types.ModuleType("chumpy"))
+    monkeypatch.setitem(sys.modules, "chumpy.ch", chumpy_ch)
+    model = standin_smpl_arrays()
+    for key in ("v_template", "shapedirs", "posedirs", "weights"):
+        model[key] = Ch(model[key])
+    model["J_regressor"] = scipy.sparse.csc_matrix(model["J_regressor"])
+    (tmp_path / "SMPL_NEUTRAL.pkl").write_bytes(pickle.dumps(model, protocol=2))
+    monkeypatch.delitem(sys.modules, "chumpy.ch")
+    monkeypatch.delitem(sys.modules, "chumpy")
+    out, _ = random_actor_output(rng, batch=1, frames=4)
+    got = actor.rot6d_to_joints(out, smpl_path=tmp_path)[0]
+    np.testing.assert_allclose(got, actor.rot6d_to_joints(out, smpl_path=smpl_dir)[0], atol=1e-6)
+    assert "chumpy" not in sys.modules
+    np.savez(tmp_path / "model.npz", **standin_smpl_arrays())  # the pickle-free format
+    np.testing.assert_allclose(actor.rot6d_to_joints(out, smpl_path=tmp_path / "model.npz")[0], got, atol=1e-6)
 
 
 def test_wrong_shapes_and_masks(smpl_dir):
