@@ -27,8 +27,6 @@ put back on the input's bone lengths.
 """
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -40,6 +38,7 @@ from refiner.anchors import AnchorConcepts
 from refiner.learned_pipeline import REPAIRS, check_detect, refine_batch
 from refiner.flaw_classifier import FlawClassifier
 from refiner.learned_refinement import FlawRecognizer, FlawRepairer
+from refiner.manifest import file_sha256, read_refiner_manifest, write_manifest
 from refiner.motion import Motion
 from refiner.recognition import AnchorQuality, AnchorRecognizer
 from refiner.skeletons import get_skeleton, joint_bone_lengths, with_bone_lengths
@@ -273,29 +272,21 @@ class Refiner:
             if part is None:
                 continue
             part.save(path) if name in _NO_DEVICE else part.save(path, half=half)
-            files[name] = {"file": path.name, "sha256": _sha256(path)}
-        manifest = {**self.manifest, "skeleton": self.skeleton, "action_names": list(self.action_names),
-                    "files": files}
-        (folder / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+            files[name] = {"file": path.name, "sha256": file_sha256(path)}
+        write_manifest(folder / "manifest.json", {**self.manifest, "skeleton": self.skeleton,
+                                                  "action_names": list(self.action_names), "files": files})
 
     @classmethod
     def load(cls, folder: str | os.PathLike, *, device: str = "cpu", verify: bool = True, **kwargs) -> "Refiner":
-        """Load a saved refiner, checking every file against the manifest's sha256."""
-        folder = Path(folder)
-        manifest_path = folder / "manifest.json"
-        if not manifest_path.is_file():
-            raise ValueError(f"no refiner at {str(folder)!r}: manifest.json is missing.")
-        manifest = json.loads(manifest_path.read_text())
-        parts = {}
-        for name, part_cls in _PARTS.items():
-            entry = manifest["files"].get(name)
-            if entry is None:
-                parts[name] = None
-                continue
-            path = folder / entry["file"]
-            if verify and _sha256(path) != entry["sha256"]:
-                raise ValueError(f"{str(path)!r} does not match the sha256 in {str(manifest_path)!r}; "
-                                 "the weights are corrupt or were replaced.")
+        """Load a saved refiner, checking its manifest's schema and sha256 and every file's sha256.
+
+        ``verify=False`` skips the hashes (not the schema). Raises ``ValueError`` naming the file and
+        the problem (see :func:`refiner.manifest.read_refiner_manifest`).
+        """
+        manifest, paths = read_refiner_manifest(folder, _PARTS, verify=verify)
+        parts = {name: None for name in _PARTS}
+        for name, path in paths.items():
+            part_cls = _PARTS[name]
             parts[name] = part_cls.load(path) if name in _NO_DEVICE else part_cls.load(path, device=device)
         return cls(**parts, skeleton=manifest["skeleton"], action_names=manifest["action_names"],
                    manifest=manifest, **kwargs)
@@ -652,7 +643,3 @@ def _check_mode(mode: str) -> str:
     if mode not in MODES:
         raise ValueError(f"unknown mode {mode!r}; known: {', '.join(MODES)}.")
     return mode
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()

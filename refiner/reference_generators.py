@@ -21,7 +21,6 @@ use only, and so are they.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -37,6 +36,7 @@ from torch import nn
 
 from refiner.components import NOT_FITTED, NetworkComponent
 from refiner.encoders import sinusoidal_positions
+from refiner.manifest import file_sha256, read_generator_manifest, write_manifest
 from refiner.motion import Motion
 from refiner.training import fit_network, resolve_device, seeded
 from refiner.validation import check_action, check_is_fitted, check_random_state
@@ -711,7 +711,7 @@ def load_reference_generator(kind: str = "a2m", *, folder: str | os.PathLike | N
         ``manifest.json``); default the shipped weights, :data:`WEIGHTS_DIR`.
     device : str, default="cpu"
     verify : bool, default=True
-        Check the file's sha256 against the manifest.
+        Check the manifest against its `content_sha256` and the file against its sha256.
 
     Returns
     -------
@@ -724,17 +724,11 @@ def load_reference_generator(kind: str = "a2m", *, folder: str | os.PathLike | N
     """
     cls = _kind(kind)
     folder = Path(folder) if folder is not None else WEIGHTS_DIR
-    manifest_path = folder / "manifest.json"
-    if not manifest_path.is_file():
-        raise ValueError(f"no reference generators at {str(folder)!r}: manifest.json is missing.")
-    entry = json.loads(manifest_path.read_text()).get("generators", {}).get(kind)
-    if entry is None:
-        raise ValueError(f"{str(manifest_path)!r} lists no {kind!r} generator; train one with "
+    _, paths = read_generator_manifest(folder, verify=verify)
+    if kind not in paths:
+        raise ValueError(f"{str(folder / 'manifest.json')!r} lists no {kind!r} generator; train one with "
                          f"`motion-refiner train-generator --kind {kind} --out {folder}`.")
-    path = folder / entry["file"]
-    if verify and _sha256(path) != entry["sha256"]:
-        raise ValueError(f"{str(path)!r} does not match the sha256 in {str(manifest_path)!r}; the weights are "
-                         "corrupt or were replaced.")
+    path = paths[kind]
     return cls.load(path, device=device)
 
 
@@ -789,13 +783,13 @@ def train_reference_generator(kind: str, dataset, out: str | os.PathLike, *, spl
                      "first-frame root at the origin"})
     subjects = sorted({int(s) for s in getattr(data, "subjects", [])})
     manifest.setdefault("generators", {})[kind] = {
-        "file": path.name, "sha256": _sha256(path), "class": cls.__name__, "split": split, "subjects": subjects,
+        "file": path.name, "sha256": file_sha256(path), "class": cls.__name__, "split": split, "subjects": subjects,
         "clips": len(data), "parameters": gen.n_parameters(), "epochs": len(gen.history_),
         "best_val_loss": min((h["val"] for h in gen.history_ if "val" in h), default=None),
         "train_seconds": gen.train_seconds_, "seed": random_state, "dtype": "float16", "command": command,
         "adapter": gen.adapter, "adapter_options": {k: v for k, v in gen.adapter_options().items() if k != "reference"},
     }
-    manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
+    write_manifest(manifest_path, manifest)
     return gen
 
 
@@ -833,10 +827,3 @@ def _median_bone_pose(clips: Sequence[np.ndarray]) -> np.ndarray:
     lengths = skel.bone_lengths(firsts)  # (N, B)
     best = int(np.argmin(np.abs(lengths - np.median(lengths, 0)).sum(1)))
     return firsts[best].astype(np.float32)
-
-
-def _sha256(path: Path) -> str:
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"no weights file at {str(path)!r}.")
-    return hashlib.sha256(path.read_bytes()).hexdigest()
