@@ -40,9 +40,11 @@ from refiner.flaw_classifier import FlawClassifier
 from refiner.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.manifest import file_sha256, read_refiner_manifest, write_manifest
 from refiner.motion import Motion
+from refiner.output_kind import like_input
 from refiner.recognition import AnchorQuality, AnchorRecognizer
 from refiner.skeletons import get_skeleton, joint_bone_lengths, with_bone_lengths
 from refiner.splines import eval_spline, fit_spline
+from refiner.training import resolve_device
 from refiner.transition_refinement import TransitionRefiner
 from refiner.transitions import TransitionGenerator, arc_length_profile, retime
 from refiner.validation import check_action, check_joints
@@ -283,6 +285,7 @@ class Refiner:
         ``verify=False`` skips the hashes (not the schema). Raises ``ValueError`` naming the file and
         the problem (see :func:`refiner.manifest.read_refiner_manifest`).
         """
+        resolve_device(device)  # an unavailable device is refused before anything is read
         manifest, paths = read_refiner_manifest(folder, _PARTS, verify=verify)
         parts = {name: None for name in _PARTS}
         for name, path in paths.items():
@@ -346,7 +349,6 @@ class Refiner:
             if result.action is None and report.action is not None:
                 result = Motion(out, skeleton=seq.skeleton, fps=seq.fps, action=report.action)
             return (result, report) if return_report else result
-        is_torch = hasattr(seq, "detach")
         ndim = len(getattr(seq, "shape", np.shape(seq)))
         batched = ndim == 4
         x = check_joints(seq, skeleton=skel, batched=batched)
@@ -360,11 +362,7 @@ class Refiner:
             outs = list(out)
         else:
             outs, reports = self._refine_each(clips, actions, mode, batched)
-        out = np.stack(outs) if batched else outs[0]
-        if is_torch:
-            import torch
-
-            out = torch.as_tensor(out, dtype=seq.dtype, device=seq.device)
+        out = like_input(np.stack(outs) if batched else outs[0], seq, x)
         if return_report:
             return out, (reports if batched else reports[0])
         return out
@@ -595,6 +593,12 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
     -------
     The same kind as ``seq`` (Motion, numpy array or torch tensor), refined; frames that were not
     flagged are returned exactly as given. The input is never modified.
+
+    dtypes and tensors: refinement runs in float32; a floating input (float64, float16, torch
+    bfloat16) comes back in its own dtype with its unchanged frames bit-identical, other inputs as
+    float32. A tensor comes back on its own device; one that requires grad comes back detached with a
+    ``UserWarning`` (refinement is not differentiable). Sparse tensors and tensors on the ``meta``
+    device raise ``ValueError``, as does a refiner loaded for an unavailable ``device``.
 
     Examples
     --------

@@ -25,10 +25,22 @@ log = logging.getLogger(__name__)
 
 
 def resolve_device(device: str | None) -> torch.device:
-    """``"auto"``/None -> CUDA when available, else CPU."""
+    """``"auto"``/None -> CUDA when available, else CPU; ``ValueError`` for an unknown or unavailable device."""
     if device in (None, "auto"):
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(device)
+    try:
+        resolved = torch.device(device)
+    except (RuntimeError, TypeError) as e:
+        raise ValueError(f"unknown `device` {device!r}: {e}") from e
+    if resolved.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError(f"`device` is {device!r} but CUDA is not available here (torch {torch.__version__}); "
+                             "use device='cpu' or 'auto'.")
+        if resolved.index is not None and resolved.index >= torch.cuda.device_count():
+            raise ValueError(f"`device` is {device!r} but only {torch.cuda.device_count()} CUDA device(s) exist.")
+    if resolved.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"`device` is {device!r} but MPS is not available here; use device='cpu' or 'auto'.")
+    return resolved
 
 
 class seeded:

@@ -24,9 +24,13 @@ __all__ = [
 
 
 def to_numpy(x, *, name: str = "seq") -> np.ndarray:
-    """Convert an array-like (numpy, torch, nested lists) to a numpy array without sharing memory."""
+    """Convert an array-like (numpy, torch, nested lists) to a numpy array without sharing memory.
+
+    Torch tensors: bfloat16 becomes float32 (exact; numpy has no bfloat16); sparse tensors and tensors
+    on the ``meta`` device (no values) raise ``ValueError``.
+    """
     if hasattr(x, "detach") and hasattr(x, "cpu"):
-        x = x.detach().cpu().numpy()
+        x = _tensor_to_numpy(x, name)
     try:
         arr = np.array(x, dtype=np.float64 if not isinstance(x, np.ndarray) else None, copy=True)
     except (TypeError, ValueError) as e:
@@ -128,3 +132,15 @@ def check_random_state(random_state) -> np.random.Generator:
     if random_state is None or isinstance(random_state, (int, np.integer)):
         return np.random.default_rng(random_state)
     raise ValueError(f"`random_state` must be None, an int or a numpy Generator; got {random_state!r}.")
+
+
+def _tensor_to_numpy(x, name: str) -> np.ndarray:
+    """A torch tensor's values as numpy, refusing what has no dense values to read."""
+    import torch
+
+    if x.layout != torch.strided:
+        raise ValueError(f"`{name}` must be a dense tensor; got layout {x.layout} (call .to_dense() first).")
+    if x.device.type == "meta":
+        raise ValueError(f"`{name}` is on the 'meta' device, which holds shapes but no values.")
+    x = x.detach().cpu()
+    return (x.float() if x.dtype == torch.bfloat16 else x).numpy()

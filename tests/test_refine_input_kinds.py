@@ -1,0 +1,71 @@
+"""refine() with float64, bfloat16, grad, sparse and meta tensors, and unavailable devices."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import refiner
+from refiner.pipeline import Refiner
+from refiner.training import resolve_device
+
+
+@pytest.fixture(scope="module")
+def flawed(humanact12):
+    """A real 60-frame clip in float64 with a 0.3 m jump on frames 30-32 (flagged) and sub-float32
+    detail, and its action's name (so no test depends on inference)."""
+    clip = humanact12[100]
+    x = clip.crop(0, 60).joints.astype(np.float64)
+    x = x + 1e-9 * np.arange(x.size).reshape(x.shape) / x.size  # lost when rounded through float32
+    x[30:33] += 0.3
+    return x, humanact12.action_names[clip.action]
+
+
+def test_float64_comes_back_float64_with_unchanged_frames_bit_identical(flawed):
+    flawed_clip, action = flawed
+    out, report = refiner.refine(flawed_clip, action=action, return_report=True)
+    changed = report.changed_frames
+    assert out.dtype == np.float64 and out.shape == flawed_clip.shape
+    assert changed.any() and not changed.all()
+    np.testing.assert_array_equal(out[~changed], flawed_clip[~changed])
+    batch = refiner.refine(np.stack([flawed_clip, flawed_clip]), action=action)
+    assert batch.dtype == np.float64
+    np.testing.assert_array_equal(batch[0][~changed], flawed_clip[~changed])
+
+
+def test_bfloat16_and_float64_tensors_keep_their_dtype(flawed):
+    flawed_clip, action = flawed
+    for dtype in (torch.bfloat16, torch.float64):
+        seq = torch.from_numpy(flawed_clip).to(dtype)
+        out, report = refiner.refine(seq, action=action, return_report=True)
+        assert out.dtype == dtype and out.shape == seq.shape
+        keep = torch.from_numpy(~report.changed_frames)
+        assert torch.equal(out[keep], seq[keep]) and not torch.equal(out, seq)
+
+
+def test_requires_grad_tensor_comes_back_detached_with_a_warning(flawed):
+    flawed_clip, action = flawed
+    seq = torch.from_numpy(flawed_clip).float().requires_grad_(True)
+    with pytest.warns(UserWarning, match="not differentiable.*detached"):
+        out = refiner.refine(seq, action=action)
+    assert not out.requires_grad and out.dtype == torch.float32
+    assert seq.requires_grad  # the input is untouched
+
+
+def test_sparse_and_meta_tensors_are_value_errors():
+    with pytest.raises(ValueError, match="must be a dense tensor"):
+        refiner.refine(torch.zeros(30, 24, 3).to_sparse())
+    with pytest.raises(ValueError, match="'meta' device"):
+        refiner.refine(torch.empty(30, 24, 3, device="meta"))
+
+
+def test_unavailable_device_is_a_value_error(monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    with pytest.raises(ValueError, match="CUDA is not available"):
+        Refiner.pretrained("humanact12", device="cuda")
+    with pytest.raises(ValueError, match="CUDA is not available"):
+        resolve_device("cuda:0")
+    with pytest.raises(ValueError, match="unknown `device` 'gpu0'"):
+        resolve_device("gpu0")
+    assert resolve_device("auto").type == "cpu"
+
