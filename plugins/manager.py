@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from refiner.motion import Motion
 
 __all__ = [
+    "AdapterPluginError",
     "AdapterPluginWarning",
     "DISABLE_AUTOLOAD_ENV",
     "ENTRY_POINT_GROUP",
@@ -39,6 +40,26 @@ BUILTIN_SOURCE = "built-in"
 
 class AdapterPluginWarning(UserWarning):
     """A plugin was skipped or misbehaved; the message names it."""
+
+
+class AdapterPluginError(ValueError):
+    """A plugin's ``refiner_convert_output`` or ``refiner_sample_generator`` raised.
+
+    The message names the plugin, where it comes from, the hook and the adapter, then the original
+    error (kept as ``__cause__``). A ``ValueError`` subclass, so the CLI reports it in one line and
+    callers catching ``ValueError`` for bad generator output are covered.
+
+    Attributes
+    ----------
+    plugin : str
+        The plugin's registered name.
+    hook : str
+        The hook that raised.
+    """
+
+    def __init__(self, message: str, *, plugin: str, hook: str):
+        super().__init__(message)
+        self.plugin, self.hook = plugin, hook
 
 
 class PluginManager(pluggy.PluginManager):
@@ -101,24 +122,42 @@ class PluginManager(pluggy.PluginManager):
             return name
         return None
 
+    def register(self, plugin: object, name: str | None = None) -> str | None:
+        """pluggy's ``register``, refusing a plugin whose adapter name another plugin already has.
+
+        Raises
+        ------
+        ValueError
+            The adapter name is taken; the message names both plugins. (The loaders of
+            :func:`get_plugin_manager` turn this into an :class:`AdapterPluginWarning` and skip it.)
+        """
+        plugin_name = super().register(plugin, name)
+        if plugin_name is None:
+            return None
+        for impl in self.hook.refiner_adapter_info.get_hookimpls():
+            if impl.plugin is not plugin:
+                continue
+            info = _call_isolated(impl, {}, "refiner_adapter_info", quiet=True)
+            owner = self._owner(info.name, exclude=plugin) if info is not None else None
+            if owner is not None:
+                self.unregister(plugin=plugin)
+                raise ValueError(f"plugin {plugin_name!r} claims adapter name {info.name!r}, but adapter name "
+                                 f"{info.name!r} is already taken by plugin {owner!r} "
+                                 f"({self.sources.get(owner, 'registered')}).")
+        return plugin_name
+
     def owner_hook(self, adapter: str, hook: str):
         """The hook caller of *hook* restricted to the plugin that registered adapter *adapter*, so that
         another plugin answering for every name cannot take over a built-in (or any other) adapter."""
-        owner = None
-        for impl in self.hook.refiner_adapter_info.get_hookimpls():
-            info = _call_isolated(impl, {}, "refiner_adapter_info", quiet=True)
-            if info is not None and info.name == adapter:
-                owner = impl.plugin
-                break
-        others = [p for p in self.get_plugins() if p is not owner]
+        owner = self._owner(adapter)
+        others = [p for p in self.get_plugins() if p is not self.get_plugin(owner)]
         return self.subset_hook_caller(hook, remove_plugins=others)
 
     def sample(self, adapter: str, generator: Any, action: Any, n: int, options: Mapping[str, Any]) -> Any:
         """Raw output from the ``refiner_sample_generator`` hook of the plugin that registered *adapter*,
-        or None when it does not implement it."""
-        return self.owner_hook(adapter, "refiner_sample_generator")(
-            adapter=adapter, generator=generator, action=action, n=n, options=dict(options)
-        )
+        or None when it does not implement it; :class:`AdapterPluginError` naming the plugin if it raises."""
+        return self._call_owner("refiner_sample_generator", adapter=adapter, generator=generator,
+                                action=action, n=n, options=dict(options))
 
     def convert(
         self,
@@ -135,7 +174,7 @@ class PluginManager(pluggy.PluginManager):
         ------
         ValueError
             Unknown adapter, a skeleton the adapter cannot produce, or whatever the adapter
-            rejects in *output* / *options*.
+            rejects in *output* / *options* (an :class:`AdapterPluginError` naming the plugin).
         """
         from refiner.motion import Motion
 
@@ -144,9 +183,8 @@ class PluginManager(pluggy.PluginManager):
             raise ValueError(
                 f"adapter {adapter!r} cannot produce skeleton {skeleton!r}; it produces: {', '.join(info.skeletons)}."
             )
-        motions = self.owner_hook(adapter, "refiner_convert_output")(
-            adapter=adapter, output=output, generator=generator, skeleton=skeleton, options=dict(options or {})
-        )
+        motions = self._call_owner("refiner_convert_output", adapter=adapter, output=output,
+                                   generator=generator, skeleton=skeleton, options=dict(options or {}))
         if motions is None:
             raise ValueError(f"adapter {adapter!r} ({info.source}) does not implement refiner_convert_output.")
         if isinstance(motions, Motion):
@@ -156,6 +194,28 @@ class PluginManager(pluggy.PluginManager):
             kinds = sorted({type(m).__name__ for m in motions})
             raise TypeError(f"adapter {adapter!r} ({info.source}) must return Motion objects; got {', '.join(kinds)}.")
         return motions
+
+    def _owner(self, adapter: str, *, exclude: object = None) -> str | None:
+        """The name of the plugin whose ``refiner_adapter_info`` names *adapter* (other than *exclude*)."""
+        for impl in self.hook.refiner_adapter_info.get_hookimpls():
+            if impl.plugin is exclude:
+                continue
+            info = _call_isolated(impl, {}, "refiner_adapter_info", quiet=True)
+            if info is not None and info.name == adapter:
+                return impl.plugin_name
+        return None
+
+    def _call_owner(self, hook: str, **kwargs: Any) -> Any:
+        """Call *hook* of ``kwargs["adapter"]``'s plugin only; wrap what it raises in an error naming the plugin."""
+        adapter = kwargs["adapter"]
+        try:
+            return self.owner_hook(adapter, hook)(**kwargs)
+        except Exception as e:  # noqa: BLE001 -- anything a third-party hook raises gets the plugin's name
+            owner = self._owner(adapter) or "?"
+            detail = str(e) if isinstance(e, ValueError) else f"{type(e).__name__}: {e}"
+            raise AdapterPluginError(
+                f"adapter {adapter!r} (plugin {owner!r}, {self.sources.get(owner, 'registered')}): {hook} "
+                f"failed: {detail}", plugin=owner, hook=hook) from e
 
 
 def get_plugin_manager(autoload: bool = True) -> PluginManager:
@@ -249,7 +309,8 @@ def _add_plugin(pm: PluginManager, name: str, load: Callable[[], object], source
 
 
 def _validate(pm: PluginManager, plugin: object, name: str) -> str | None:
-    """Why *plugin* cannot be used (misspelled hook, bad adapter info, taken name), or None."""
+    """Why *plugin* cannot be used (misspelled hook, bad adapter info), or None; taken names are refused by
+    :meth:`PluginManager.register`."""
     from refiner.adapters.base import AdapterInfo
     from refiner.skeletons import list_skeletons
 
@@ -258,14 +319,7 @@ def _validate(pm: PluginManager, plugin: object, name: str) -> str | None:
             impl.plugin is plugin and not impl.optionalhook for impl in caller.get_hookimpls()
         ):
             return f"hook {caller.name!r} is not a motion-refiner hook (misspelled?)."
-    impls = pm.hook.refiner_adapter_info.get_hookimpls()
-    taken = set()
-    for impl in impls:
-        if impl.plugin is not plugin:
-            info = _call_isolated(impl, {}, "refiner_adapter_info", quiet=True)
-            if info is not None:
-                taken.add(info.name)
-    for impl in impls:
+    for impl in pm.hook.refiner_adapter_info.get_hookimpls():
         if impl.plugin is not plugin:
             continue
         try:
@@ -274,8 +328,6 @@ def _validate(pm: PluginManager, plugin: object, name: str) -> str | None:
             return f"refiner_adapter_info raised {type(e).__name__}: {e}"
         if not isinstance(info, AdapterInfo):
             return f"refiner_adapter_info must return an AdapterInfo; got {type(info).__name__}."
-        if info.name in taken:
-            return f"adapter name {info.name!r} is already taken by another plugin."
         unknown = [s for s in info.skeletons if s not in list_skeletons()]
         if unknown:
             return f"adapter {info.name!r} names unregistered skeleton(s) {unknown}; register them first."

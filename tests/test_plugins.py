@@ -191,7 +191,7 @@ def test_broken_plugins_warn_and_others_keep_working(example_installed, tmp_path
             ("bad_mr_raising_adapter", "raised RuntimeError: boom"),
             ("bad_mr_typo_adapter", "'refiner_adaptor_info' is not a motion-refiner hook"),
             ("bad_mr_badarg_adapter", "could not be registered"),
-            ("bad_mr_duplicate_adapter", "adapter name 'actor' is already taken"),
+            ("bad_mr_duplicate_adapter", "adapter name 'actor' is already taken by plugin 'actor' (built-in)"),
             ("bad_mr_noinfo_adapter", "must return an AdapterInfo"),
             ("bad_mr_import_error_adapter", "failed to import"),
             ("bad_missing", "failed to import"),
@@ -303,3 +303,45 @@ def test_a_plugin_answering_for_every_name_cannot_take_over_a_builtin():
     assert np.abs(out[0].joints).max() > 0  # the built-in converted it, not the greedy plugin's zeros
     assert pm.convert("greedy", raw)[0].joints.max() == 0.0
     assert pm.sample("action2motion", object(), 0, 1, {}) != "hijacked"
+
+
+def test_a_second_plugin_claiming_a_taken_name_is_refused_naming_both(pm):
+    class Impostor:
+        @hookimpl
+        def refiner_adapter_info(self):
+            return AdapterInfo("action2motion", "an impostor", ("humanact12",))
+
+    with pytest.raises(ValueError, match="plugin 'impostor' claims adapter name 'action2motion'.*"
+                                         "taken by plugin 'action2motion' \\(built-in\\)"):
+        pm.register(Impostor(), name="impostor")
+    assert pm.get_plugin("impostor") is None and pm.get_adapter("action2motion").source == "built-in"
+
+
+def test_a_raising_convert_or_sample_hook_is_wrapped_naming_the_plugin(pm):
+    from refiner.generators import RefinedGenerator
+    from refiner.plugins.manager import AdapterPluginError
+
+    class Fragile:
+        @hookimpl
+        def refiner_adapter_info(self):
+            return AdapterInfo("fragile", "joints", ("humanact12",))
+
+        @hookimpl
+        def refiner_convert_output(self, adapter, output):
+            raise KeyError("joints3D")
+
+        @hookimpl
+        def refiner_sample_generator(self, adapter, generator, action, n):
+            raise RuntimeError("out of memory")
+
+    pm.register(Fragile(), name="fragile_plugin")
+    with pytest.raises(AdapterPluginError, match="adapter 'fragile' \\(plugin 'fragile_plugin', registered\\): "
+                                                 "refiner_convert_output failed: KeyError: 'joints3D'") as info:
+        pm.convert("fragile", np.zeros((5, 24, 3)))
+    assert info.value.plugin == "fragile_plugin" and isinstance(info.value.__cause__, KeyError)
+    gen = RefinedGenerator(lambda action, n: None, adapter="fragile", refiner=lambda m: m, plugin_manager=pm)
+    with pytest.raises(AdapterPluginError, match="'fragile_plugin'.*refiner_sample_generator failed: RuntimeError: "
+                                                 "out of memory"):
+        gen.sample(0)
+    with pytest.raises(ValueError, match="plugin 'action2motion', built-in.*representation"):  # built-ins too
+        pm.convert("action2motion", np.zeros((1, 60, 72)))
