@@ -79,6 +79,8 @@ def demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-mp4", action="store_true", help="GIF only, even when ffmpeg is on PATH")
     p.add_argument("--quick", action="store_true", help="two actions and a small animation (for tests)")
+    p.add_argument("--force", action="store_true", help="replace the demo's files in an existing --out folder")
+    _gif_size_argument(p)
     _threads_argument(p)
 
 
@@ -91,7 +93,7 @@ def demo_run(args: argparse.Namespace) -> int:
     print(f"sampling {'every action' if actions is None and not args.quick else 'the chosen actions'} from the "
           f"{args.generator!r} reference generator, refining and drawing into {args.out} ...", flush=True)
     result = run_demo(args.out, generator=args.generator, actions=actions, quick=args.quick, random_state=args.seed,
-                      mp4=False if args.no_mp4 else None, progress=True)
+                      mp4=False if args.no_mp4 else None, progress=True, gif_size=args.gif_size, overwrite=args.force)
     print(format_table(result.rows))
     print("confidence: the HumanAct12 recogniser's probability of the sampled action (hidden state fixed); "
           "anchors flagged: flagged / recognised anchors.")
@@ -125,6 +127,7 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--refiner", type=Path, default=None, help="folder of a saved refiner (default: shipped weights)")
     p.add_argument("--report", action="store_true", help="write <out>.report.json next to each output")
     p.add_argument("--gif", action="store_true", help="write a before/after <out>.gif next to each output")
+    _gif_size_argument(p)
     p.add_argument("--bvh", action="store_true", help="write the refined motion as <out>.bvh (exact joint positions)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     _threads_argument(p)
@@ -167,11 +170,15 @@ def refine_run(args: argparse.Namespace) -> int:
         pm.get_adapter(args.adapter)  # an unknown adapter is a usage error, not a per-file failure
 
     failed, done, changed_total, frames_total = [], 0, 0, 0
-    bar = tqdm(list(zip(inputs, targets)), desc="refine", unit="file", disable=len(inputs) == 1)
+    single = len(inputs) == 1  # a folder gets a bar over its files; one file says what it is doing
+    if single:
+        print(f"refining {inputs[0]}" + (" and drawing its GIF" if args.gif else "") + " ...", flush=True)
+    bar = tqdm(list(zip(inputs, targets)), desc="refine", unit="file", disable=single)
     for path, target in bar:
         bar.set_postfix_str(path.name)
         try:
-            written, changed, frames = _refine_file(path, target, args, refiner, pm, skeleton, options)
+            written, changed, frames = _refine_file(path, target, args, refiner, pm, skeleton, options,
+                                                    progress=single)
         except (ValueError, TypeError, OSError) as e:
             failed.append(path)
             tqdm.write(f"FAILED {path}: {e}", file=sys.stderr)
@@ -235,7 +242,12 @@ def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12"
             raise ValueError(f"{path.name}: joints must have shape (T, J, 3) or (N, T, J, 3); got {tuple(arr.shape)} "
                              "(raw generator output needs --adapter).")
         batched = arr.ndim == 4
-        motions = [Motion(clip, skeleton=skeleton, fps=fps) for clip in (arr if batched else arr[None])]
+        motions = []
+        for i, clip in enumerate(arr if batched else arr[None]):
+            try:
+                motions.append(Motion(clip, skeleton=skeleton, fps=fps))
+            except ValueError as e:  # name the clip of a batch, whatever is wrong with it
+                raise ValueError(f"{path.name}: " + (f"clip {i} of {len(arr)}: " if batched else "") + str(e)) from e
     if labels is not None:
         labels = np.atleast_1d(labels)
         if len(labels) not in (1, len(motions)):
@@ -246,8 +258,10 @@ def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12"
     return motions, batched
 
 
-def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, options: dict):
-    """Refine one file and write its outputs; returns ``(paths written, frames changed, frames)``."""
+def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, options: dict, *,
+                 progress: bool = False):
+    """Refine one file and write its outputs (``progress``: a bar while drawing GIFs); returns
+    ``(paths written, frames changed, frames)``."""
     if target.resolve() == path.resolve():
         raise ValueError("the output would replace the input; choose another -o.")
     motions, batched = load_input(path, adapter=args.adapter, skeleton=skeleton, options=options, fps=args.fps,
@@ -292,10 +306,12 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
         written.append(Path(f"{stem}.report.json"))
     if args.gif:
         from refiner import viz
+        from refiner.demo import GIF_DPI
 
         for s, before, after, report in zip(per_clip, motions, refined, reports):
             written += viz.animate(before, after, flagged=report.flagged_anchors, path=Path(f"{stem}{s}.gif"),
-                                   labels=("input", "refined"), mp4=False, panel_size=2.4, dpi=64)
+                                   labels=("input", "refined"), mp4=False, panel_size=args.gif_size / GIF_DPI,
+                                   dpi=GIF_DPI, progress=progress)
     if args.bvh:
         from refiner.bvh import save_bvh
 
@@ -327,6 +343,20 @@ def _read_array_file(path: Path, *, want_dict: bool):
     if want_dict:
         return arrays, labels
     raise ValueError(f"{path.name} holds several arrays ({', '.join(arrays)}); name the joints 'joints'.")
+
+
+def _gif_size_argument(p: argparse.ArgumentParser) -> None:
+    from refiner.demo import GIF_PANEL_PX
+
+    p.add_argument("--gif-size", type=_positive_int, default=GIF_PANEL_PX, metavar="PX",
+                   help=f"edge of each GIF panel in pixels (default {GIF_PANEL_PX}; before/after side by side)")
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive int; got {text!r}")
+    return value
 
 
 def _threads_argument(p: argparse.ArgumentParser) -> None:

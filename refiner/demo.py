@@ -18,7 +18,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
-__all__ = ["DemoRow", "DemoResult", "run_demo", "format_table"]
+__all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table"]
+
+#: Default edge of one GIF panel in pixels (the demo's and ``refine --gif``'s before/after animations).
+GIF_PANEL_PX = 320
+#: Resolution the GIFs are drawn at; a panel is ``GIF_PANEL_PX / GIF_DPI`` inches.
+GIF_DPI = 80
 
 
 @dataclass
@@ -81,13 +86,15 @@ def run_demo(
     progress: bool = False,
     generator_folder: str | os.PathLike | None = None,
     recognizer_dir: str | os.PathLike | None = None,
+    gif_size: int = GIF_PANEL_PX,
+    overwrite: bool = False,
 ) -> DemoResult:
     """Sample, refine and visualise one clip per action.
 
     Parameters
     ----------
     out : path
-        Output folder (created). Existing files of the same names are replaced.
+        Output folder (created).
     generator : {"a2m", "actor"}, default="a2m"
         Which shipped reference generator to sample.
     actions : sequence of int or str, optional
@@ -107,6 +114,11 @@ def run_demo(
         Folder of generator weights; default the shipped ones.
     recognizer_dir : path, optional
         Folder of the Action2Motion recognisers; default :func:`refiner.evaluators.evaluators_dir`.
+    gif_size : int, default=GIF_PANEL_PX
+        Edge of each animation panel in pixels (``quick`` draws small ones regardless).
+    overwrite : bool, default=False
+        Replace files of a previous demo in ``out``; without it, any of the demo's files already there
+        is a ``ValueError`` raised before anything is written (the CLI's ``--force``).
 
     Returns
     -------
@@ -115,7 +127,8 @@ def run_demo(
     Raises
     ------
     ValueError
-        Unknown generator or action, missing weights or recogniser.
+        Unknown generator or action, missing weights or recogniser, a bad ``gif_size``, or files
+        of the demo already in ``out`` without ``overwrite``.
     """
     from tqdm.auto import tqdm
 
@@ -135,7 +148,14 @@ def run_demo(
     labels = [check_action(a, HUMANACT12_ACTIONS) for a in actions]
     if not labels:
         raise ValueError("`actions` must name at least one action; got none.")
+    if isinstance(gif_size, (bool, np.bool_)) or not isinstance(gif_size, (int, np.integer)) or gif_size < 1:
+        raise ValueError(f"`gif_size` must be a positive int (pixels); got {gif_size!r}.")
     out = Path(out)
+    existing = _existing_outputs(out, [f"{a:02d}_{HUMANACT12_ACTIONS[a]}" for a in labels])
+    if existing and not overwrite:
+        shown = ", ".join(existing[:4]) + (f" and {len(existing) - 4} more" if len(existing) > 4 else "")
+        raise ValueError(f"refusing to overwrite {shown} in {str(out)!r}; pass --force (overwrite=True) "
+                         "or choose another --out.")
     out.mkdir(parents=True, exist_ok=True)
 
     gen = load_reference_generator(generator, folder=generator_folder)
@@ -150,7 +170,7 @@ def run_demo(
     detect = float(getattr(getattr(refiner, "recognizer", None), "detect_threshold_", 0.5))
     recognizer = load_recognizer("humanact12", hidden="fixed", directory=recognizer_dir)
     n_frames = 24 if quick else None
-    gif = {"panel_size": 1.6, "dpi": 40} if quick else {"panel_size": 2.4, "dpi": 64}
+    gif = {"panel_size": 1.6, "dpi": 40} if quick else {"panel_size": gif_size / GIF_DPI, "dpi": GIF_DPI}
 
     samples = []
     for label in tqdm(labels, desc=f"demo ({generator})", disable=not progress, unit="action"):
@@ -220,8 +240,12 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
     anim_flags = [f for f in flagged if f < anim_before.n_frames]
     animations = viz.animate(anim_before, anim_after, flagged=anim_flags, path=out / f"{stem}.gif",
                              labels=("generated", "refined"), mp4=mp4, **gif)
+    action = stem.split("_", 1)[1].replace("_", " ")
     viz.keyframe_strip([before, after], flagged=flagged, path=out / f"{stem}_keyframes.png",
-                       labels=("generated", "refined"), n_keyframes=6 if n_frames else 8)
+                       labels=("generated", "refined"), n_keyframes=6 if n_frames else 8,
+                       title=f"{action}: key frames, generated (top) and refined (bottom)")
+    # Name each plotted threshold by its quantity: the report's own `threshold` is, for the concepts
+    # method, a pose-score threshold (report.threshold_quantity), not this anchor-probability one.
     if report.flaw_probability:  # the learned method: per-frame flaw probability and its threshold
         probability, threshold, label = report.flaw_probability, report.threshold, "flaw probability"
     else:
@@ -230,11 +254,20 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
     if probability.size != before.n_frames:  # clips too short to refine carry no per-frame scores
         probability = np.zeros(before.n_frames)
     viz.plot_scores(probability, threshold, anchors=report.anchors, flagged=flagged, path=out / f"{stem}_scores.png",
-                    fps=before.fps, label=label)
+                    fps=before.fps, label=label, title=f"{action}: {label} per frame (generated clip)")
     names = [f"{stem}.gif"] + [p.name for p in animations[1:]]
     names += [f"{stem}_keyframes.png", f"{stem}_scores.png", f"{stem}_before.npy", f"{stem}_after.npy",
               f"{stem}_report.json"]
     return names
+
+
+def _existing_outputs(out: Path, stems: Sequence[str]) -> list[str]:
+    """Names of files in ``out`` that the demo would write (its summary, or any file of an action's stem)."""
+    if not out.is_dir():
+        return []
+    return sorted(p.name for p in out.iterdir()
+                  if p.name in ("summary.md", "summary.json") or any(p.name.startswith(s + ".") or
+                                                                     p.name.startswith(s + "_") for s in stems))
 
 
 def _softmax(logits: np.ndarray) -> np.ndarray:

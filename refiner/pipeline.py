@@ -109,8 +109,22 @@ class RefinementReport:
             mask[c["start"] : c["stop"]] = True
         return mask
 
+    @property
+    def threshold_quantity(self) -> str | None:
+        """The field ``threshold`` applies to: ``"flaw_probability"`` (learned method) or ``"anchor_scores"``
+        (concepts method: the anchors' pose scores, a log-likelihood, not ``anchor_probability``)."""
+        if self.threshold is None:
+            return None
+        return "flaw_probability" if self.flaw_probability else "anchor_scores"
+
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The fields as a JSON-ready dict, with ``threshold_quantity`` after ``threshold``."""
+        out = {}
+        for key, value in asdict(self).items():
+            out[key] = value
+            if key == "threshold":
+                out["threshold_quantity"] = self.threshold_quantity
+        return out
 
 
 def smoothstep(n: int) -> np.ndarray:
@@ -352,8 +366,14 @@ class Refiner:
         ndim = len(getattr(seq, "shape", np.shape(seq)))
         batched = ndim == 4
         x = check_joints(seq, skeleton=skel, batched=batched)
-        _check_metres(x, skel)
         clips = x if batched else x[None]
+        for i, clip in enumerate(clips):  # per clip: one clip in centimetres must not hide in a batch's median
+            try:
+                _check_metres(clip, skel)
+            except ValueError as e:
+                if not batched:
+                    raise
+                raise ValueError(f"clip {i} of {len(clips)}: {e}") from e
         actions = action if (batched and isinstance(action, (list, tuple, np.ndarray))) else [action] * len(clips)
         if len(actions) != len(clips):
             raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")

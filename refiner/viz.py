@@ -45,6 +45,7 @@ VIEWS = ("front", "side", "3d")
 
 _LEFT, _RIGHT, _CENTRE, _FLAG = "#1f77b4", "#2ca02c", "#404040", "#d62728"
 _MARGIN = 0.08  # fraction of the body's extent left free around it
+_LEGEND_INCHES = 0.3  # height of the key-frame strip's colour legend
 
 
 def draw_pose(
@@ -164,6 +165,7 @@ def keyframe_strip(
     view: str = "front",
     panel_size: float = 1.6,
     dpi: int = 100,
+    title: str | None = None,
 ) -> Figure:
     """A grid of key frames: one row per motion (e.g. before / after refinement), one column per frame.
 
@@ -188,6 +190,9 @@ def keyframe_strip(
     panel_size : float, default=1.6
         Panel edge in inches.
     dpi : int, default=100
+    title : str, optional
+        Figure title (e.g. the action). A colour legend (left / right / centre bones, flagged) is
+        drawn below the title in any case.
 
     Returns
     -------
@@ -217,7 +222,8 @@ def keyframe_strip(
         raise ValueError(f"`panel_size` must be a positive number of inches; got {panel_size!r}.")
 
     skels = [m.skeleton_info for m in rows]
-    fig = _figure(panel_size * len(cols) + 0.4, panel_size * len(rows) + 0.3, dpi=dpi)
+    head = 0.3 + _LEGEND_INCHES + (0.3 if title else 0.0)  # frame titles, the colour legend, the title
+    fig = _figure(panel_size * len(cols) + 0.4, panel_size * len(rows) + head, dpi=dpi)
     limits = _limits([m.joints for m in rows], skels, view)
     flag_set = set(flags.tolist())
     for r, (motion, skel) in enumerate(zip(rows, skels)):
@@ -234,8 +240,11 @@ def keyframe_strip(
                 else:
                     ax.set_ylabel(labels[r], fontsize=9)
     fig.subplots_adjust(left=0.3 / fig.get_figwidth() + 0.01, right=0.99, bottom=0.01,
-                        top=1 - 0.3 / fig.get_figheight(),
+                        top=1 - head / fig.get_figheight(),
                         wspace=0.05, hspace=0.05)
+    if title:
+        fig.suptitle(title, y=1 - 0.05 / fig.get_figheight(), va="top", fontsize=10)
+    _colour_legend(fig, y=1 - (head - _LEGEND_INCHES / 2 - 0.3) / fig.get_figheight())
     if out is not None:
         fig.savefig(out, dpi=dpi, facecolor="white")
     return fig
@@ -254,6 +263,7 @@ def animate(
     mp4: bool | None = None,
     panel_size: float = 3.0,
     dpi: int = 80,
+    progress: bool = False,
 ) -> list[Path]:
     """Animate a motion, or a before / after pair side by side, as GIF (and MP4 when ffmpeg exists).
 
@@ -280,6 +290,8 @@ def animate(
     panel_size : float, default=3.0
         Panel edge in inches.
     dpi : int, default=80
+    progress : bool, default=False
+        Show a progress bar over the frames drawn (stderr).
 
     Returns
     -------
@@ -326,8 +338,10 @@ def animate(
     writers = [PillowWriter(fps=fps) if t.suffix.lower() == ".gif" else FFMpegWriter(fps=fps) for t in targets]
     for writer, target in zip(writers, targets):
         writer.setup(fig, str(target), dpi=dpi)
+    from tqdm.auto import tqdm
+
     try:
-        for t in range(n_frames):
+        for t in tqdm(range(n_frames), desc=f"drawing {out.name}", unit="frame", disable=not progress):
             is_flagged = t in flags
             for r, (motion, artist, ax) in enumerate(zip(rows, artists, axes)):
                 artist.draw(motion.joints[min(t, motion.n_frames - 1)], highlight=is_flagged and r == 0)
@@ -351,6 +365,7 @@ def plot_scores(
     *,
     fps: float | None = None,
     label: str = "anchor score",
+    title: str | None = None,
 ) -> Figure:
     """Plot per-frame anchor scores with the flagging threshold.
 
@@ -369,7 +384,10 @@ def plot_scores(
     fps : float, optional
         When given, the x axis is in seconds instead of frames.
     label : str, default="anchor score"
-        The y-axis label.
+        The quantity plotted: the y-axis label, the curve's legend entry and the threshold line's
+        (``"<label> threshold = ..."``), so thresholds of different quantities are not confused.
+    title : str, optional
+        Axes title (e.g. the action).
 
     Returns
     -------
@@ -399,7 +417,7 @@ def plot_scores(
     fig = _figure(7.0, 2.8, dpi=100)
     ax = fig.add_subplot(1, 1, 1)
     ax.plot(x, s, color=_CENTRE, lw=1.2, label=label)
-    ax.axhline(float(threshold), color=_FLAG, ls="--", lw=1.2, label=f"threshold = {float(threshold):.3g}")
+    ax.axhline(float(threshold), color=_FLAG, ls="--", lw=1.2, label=f"{label} threshold = {float(threshold):.3g}")
     if anchor_idx.size:
         ax.plot(x[anchor_idx], s[anchor_idx], "o", color=_LEFT, ms=5, label="anchors")
     if flag_idx.size:
@@ -409,6 +427,8 @@ def plot_scores(
         ax.plot(x[flag_idx], s[flag_idx], "x", color=_FLAG, ms=8, mew=2, label="flagged")
     ax.set_xlabel("time (s)" if fps else "frame")
     ax.set_ylabel(label)
+    if title:
+        ax.set_title(title, fontsize=10)
     ax.set_xlim(x[0] - 0.5 / (fps or 1.0), x[-1] + 0.5 / (fps or 1.0))
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8, framealpha=0.8)
@@ -456,6 +476,16 @@ class _PoseArtist:
             self.collection.set_color(colors)
             self.collection.set_linewidth(width)
         return self.collection
+
+
+def _colour_legend(fig: Figure, *, y: float) -> None:
+    """One legend line naming the bone colours and the flag colour, centred at height ``y``."""
+    from matplotlib.lines import Line2D
+
+    entries = [("left side", _LEFT), ("right side", _RIGHT), ("centre", _CENTRE), ("flagged frame", _FLAG)]
+    handles = [Line2D([], [], color=c, lw=2.5, label=n) for n, c in entries]
+    fig.legend(handles=handles, loc="center", bbox_to_anchor=(0.5, y), ncol=len(handles), fontsize=7,
+               frameon=False, handlelength=1.5, columnspacing=1.0)
 
 
 def _basis(skel: Skeleton, view: str) -> np.ndarray:

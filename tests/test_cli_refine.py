@@ -46,6 +46,10 @@ def test_round_trip_with_report_gif_and_bvh(clip, tmp_path, capsys):
     assert names[0] == "pelvis" and joints.shape == (60, 24, 3)
     assert np.linalg.norm(joints - refined, axis=-1).max() < 1e-3  # within 1 mm
     assert (tmp_path / "out" / "walk_refined.gif").stat().st_size > 1000
+    from PIL import Image
+
+    with Image.open(tmp_path / "out" / "walk_refined.gif") as gif:
+        assert gif.size[0] == 2 * 320  # two panels of the default 320 px (was 307 px in all)
 
 
 @pytest.mark.real_data
@@ -123,3 +127,32 @@ def test_inputs_that_would_share_an_output_are_refused_before_writing(clip, tmp_
     code = main(["refine", str(folder), "-o", str(out), "--force"])
     assert code == 2 and "same output (clip.npy)" in capsys.readouterr().err
     assert not out.exists() or not any(out.iterdir())  # nothing written, so nothing lost
+
+
+@pytest.mark.real_data
+def test_single_file_gif_shows_progress_and_takes_a_size(clip, tmp_path, capsys):
+    from PIL import Image
+
+    src = tmp_path / "walk.npy"
+    np.save(src, clip[:30])
+    code = main(["refine", str(src), "-o", str(tmp_path / "o.npy"), "--gif", "--gif-size", "160", "--mode", "anchor"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert f"refining {src} and drawing its GIF ..." in captured.out
+    assert "drawing o.gif" in captured.err and "30/30" in captured.err  # the frame bar
+    with Image.open(tmp_path / "o.gif") as gif:
+        assert gif.size == (2 * 160, 160 + 32) and gif.n_frames == 30
+    with pytest.raises(SystemExit):
+        main(["refine", str(src), "-o", str(tmp_path / "p.npy"), "--gif", "--gif-size", "0"])
+
+
+@pytest.mark.real_data
+def test_batch_file_errors_name_the_clip(clip, tmp_path, capsys):
+    batch = np.stack([clip[:40]] * 3)
+    batch[2, 7, 4, 1] = np.nan
+    np.save(tmp_path / "nan_batch.npy", batch)
+    assert main(["refine", str(tmp_path / "nan_batch.npy"), "-o", str(tmp_path / "out")]) == 1
+    assert "nan_batch.npy: clip 2 of 3: `joints` contains 1 NaN" in capsys.readouterr().err
+    np.save(tmp_path / "cm_batch.npy", np.stack([clip[:40], clip[:40] * 100]))
+    assert main(["refine", str(tmp_path / "cm_batch.npy"), "-o", str(tmp_path / "out")]) == 1
+    assert "clip 1 of 2" in (err := capsys.readouterr().err) and "centimetres" in err

@@ -114,3 +114,23 @@ def test_summary_row_says_total_for_counts_and_mean_for_confidence():
             for a, n, c, b in ((0, "warm_up", 59, 0.2), (1, "walk", 0, 0.6))]
     last = format_table(rows).splitlines()[-1]
     assert last.startswith("| **total; mean confidence** | 59/120 | 2/6 | 0.400 | 0.400 |")
+
+
+@pytest.mark.real_data
+def test_demo_refuses_to_overwrite_its_files_without_force(demo_run, tmp_path, capsys):
+    """Like `refine`: existing outputs are never replaced without --force, and nothing is written first."""
+    from refiner.demo import run_demo
+
+    out, _ = demo_run
+    before = (out / "summary.json").read_bytes()
+    assert main(["demo", "--out", str(out), "--quick", "--no-mp4"]) == 2
+    err = capsys.readouterr().err
+    assert "refusing to overwrite 01_walk.gif" in err and "--force" in err
+    assert (out / "summary.json").read_bytes() == before
+    (tmp_path / "03_jump.gif").write_bytes(b"stale")
+    (tmp_path / "notes.txt").write_text("not the demo's")  # other files do not block the demo
+    with pytest.raises(ValueError, match="refusing to overwrite 03_jump.gif"):
+        run_demo(tmp_path, actions=["jump"], quick=True, mp4=False)
+    result = run_demo(tmp_path, actions=["jump"], quick=True, mp4=False, overwrite=True)
+    assert (tmp_path / "03_jump.gif").stat().st_size > 1000 and result.rows[0].action_name == "jump"
+    assert run_demo(tmp_path / "new", actions=["jump"], quick=True, mp4=False).rows  # a fresh folder needs no force

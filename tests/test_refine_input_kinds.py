@@ -1,4 +1,4 @@
-"""refine() with float64, bfloat16, grad, sparse and meta tensors, and unavailable devices."""
+"""refine() inputs: float64, bfloat16, grad, sparse and meta tensors, unavailable devices, batch errors."""
 from __future__ import annotations
 
 import numpy as np
@@ -69,3 +69,30 @@ def test_unavailable_device_is_a_value_error(monkeypatch):
         resolve_device("gpu0")
     assert resolve_device("auto").type == "cpu"
 
+
+def test_batch_errors_name_the_clip_for_every_kind(flawed):
+    clip = flawed[0][:40]
+    batch = np.stack([clip, clip, clip])
+    for change, match in [
+        (lambda b: b.__setitem__((1, 5, 3, 0), np.nan), "first at clip 1, frame 5, joint 3"),
+        (lambda b: b.__setitem__(1, b[1] * 100), "clip 1 of 3: .*centimetres"),
+        (lambda b: b.__setitem__((2, 5, 3, 0), 1e6), "clip 2 of 3: .*metres"),
+    ]:
+        bad = batch.copy()
+        change(bad)
+        with pytest.raises(ValueError, match=match):
+            refiner.refine(bad)
+    with pytest.raises(ValueError, match=r"J=24 .*got \(3, 40, 22, 3\)"):  # one joint count for the whole batch
+        refiner.refine(batch[:, :, :22])
+
+
+def test_report_names_the_quantity_its_threshold_applies_to():
+    from refiner.pipeline import RefinementReport
+
+    concepts = RefinementReport(mode="full", n_frames=3, threshold=-32.158, anchor_scores=[-10.0],
+                                anchor_probability=[0.1, 0.9, 0.2]).to_dict()
+    assert concepts["threshold_quantity"] == "anchor_scores" and list(concepts).index("threshold_quantity") == \
+        list(concepts).index("threshold") + 1
+    learned = RefinementReport(mode="full", n_frames=3, threshold=0.93, flaw_probability=[0.1, 0.2, 0.3])
+    assert learned.to_dict()["threshold_quantity"] == "flaw_probability"
+    assert RefinementReport(mode="full", n_frames=3).to_dict()["threshold_quantity"] is None

@@ -176,13 +176,24 @@ def test_keyframe_strip_png(tmp_path):
     assert len({ax.get_xlim() for ax in fig.axes}) == 1
 
 
+def test_keyframe_strip_and_score_plot_titles_and_legends(tmp_path):
+    """Both figures can name the action; the strip explains its colours; the threshold names its quantity."""
+    fig = viz.keyframe_strip([_moving_clip(20)] * 2, flagged=[3], n_keyframes=3, title="jump: generated vs refined")
+    assert fig._suptitle.get_text() == "jump: generated vs refined"
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["left side", "right side", "centre", "flagged frame"]
+    fig = viz.plot_scores(np.linspace(0, 1, 30), 0.25, label="anchor probability", title="jump")
+    ax = fig.axes[0]
+    assert ax.get_title() == "jump"
+    assert "anchor probability threshold = 0.25" in [t.get_text() for t in ax.get_legend().get_texts()]
+
+
 def test_plot_scores_png(tmp_path):
     scores = np.linspace(0.0, 2.0, 30)
     fig = viz.plot_scores(scores, 1.5, anchors=[0, 10, 20, 29], flagged=[29], path=tmp_path / "p.png")
     assert (tmp_path / "p.png").stat().st_size > 1000
     ax = fig.axes[0]
     lines = {line.get_label(): line for line in ax.get_lines()}
-    np.testing.assert_allclose(lines["threshold = 1.5"].get_ydata(), [1.5, 1.5])
+    np.testing.assert_allclose(lines["anchor score threshold = 1.5"].get_ydata(), [1.5, 1.5])
     np.testing.assert_allclose(lines["anchors"].get_xdata(), [0, 10, 20, 29])
     np.testing.assert_allclose(lines["flagged"].get_ydata(), [2.0])
 
