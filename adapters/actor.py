@@ -36,6 +36,9 @@ __all__ = [
 
 SMPL_ENV = "MOTION_REFINER_SMPL"
 J_REGRESSOR_EXTRA_ENV = "MOTION_REFINER_J_REGRESSOR_EXTRA"
+#: Where the SMPL neutral model comes from (it is not shipped: SMPL's licence).
+SMPL_ORIGIN = ("the SMPL neutral model basicModel_neutral_lbs_10_207_0_v1.0.0.pkl (SMPLify release, "
+               "https://smplify.is.tue.mpg.de, free registration; ACTOR and MLD call it models/smpl/SMPL_NEUTRAL.pkl)")
 #: ACTOR's ``a2m`` joints: indices into 24 LBS joints + 21 smplx vertex keypoints + 9
 #: ``J_regressor_extra`` rows (nose = vertex 332 at 24, heels = vertices 3387 / 6787 at 31 / 34,
 #: head top = extra row 3 at 48), generator_formats.md §1.2.
@@ -74,7 +77,7 @@ def load_smpl(smpl_path=None):
         not a usable SMPL model file.
     """
     path = resolve_path(smpl_path, param="smpl_path", env=SMPL_ENV, what="the SMPL neutral model file",
-                        default_name="SMPL_NEUTRAL.pkl")
+                        default_name="SMPL_NEUTRAL.pkl", origin=SMPL_ORIGIN)
     stat = path.stat()
     return _load_smpl_cached(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
 
@@ -246,7 +249,8 @@ def _load_j_regressor_extra(value, smpl_path, layer) -> np.ndarray:
             value = beside
     if value is None or isinstance(value, (str, os.PathLike)):
         path = resolve_path(value, param="j_regressor_extra", env=J_REGRESSOR_EXTRA_ENV,
-                            what="ACTOR's J_regressor_extra.npy (for the 18-joint UESTC layout)")
+                            what="ACTOR's J_regressor_extra.npy (for the 18-joint UESTC layout)",
+                            origin="ACTOR's SMPL files, models/smpl/J_regressor_extra.npy (https://github.com/Mathux/ACTOR)")
         value = np.load(path)
     arr = check_raw(value, name="j_regressor_extra", ndims=(2,), what="(9, V)")
     n_verts = layer.v_template.shape[0]

@@ -124,23 +124,26 @@ def call_with_options(fn: Callable[..., Any], output: Any, options: Mapping[str,
     return fn(output, **options)
 
 
-def resolve_path(value, *, param: str, env: str, what: str, default_name: str | None = None) -> Path:
+def resolve_path(value, *, param: str, env: str, what: str, default_name: str | None = None,
+                 origin: str = "") -> Path:
     """The file given by ``value``, else by ``$env``; a folder is searched for ``default_name``.
 
-    Raises ``ValueError`` naming the parameter and the environment variable when neither points
-    to an existing file.
+    Raises ``ValueError`` naming the parameter, the environment variable, the expected file name and
+    where the file comes from (``origin``) when neither points to an existing file.
     """
     source = f"`{param}`"
     if value is None:
         value = os.environ.get(env)
         source = f"${env}"
+    where = f" Get it from {origin}." if origin else ""
     if value is None or str(value) == "":
-        raise ValueError(f"{what} is needed: pass `{param}=` (a file path) or set the environment variable {env}.")
+        raise ValueError(f"{what} is needed: pass `{param}=` (a file path) or set the environment variable {env}"
+                         + (f" (a file, or a folder holding {default_name})." if default_name else ".") + where)
     path = Path(value).expanduser()
     if path.is_dir() and default_name is not None:
         path = path / default_name
     if not path.is_file():
-        raise ValueError(f"{what} not found: {source} points to {str(path)!r}, which is not a file.")
+        raise ValueError(f"{what} not found: {source} points to {str(path)!r}, which is not a file.{where}")
     return path
 
 

@@ -2,7 +2,7 @@
 
 Data are never shipped with the package (licences); pass a path, set ``MOTION_REFINER_DATA`` to the
 folder holding ``humanact12/`` and ``cmu_mocap/``, or keep them in ``../shared/data`` beside the
-working directory.
+working directory. Where the files come from: :mod:`refiner.data_sources`.
 """
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from refiner.data_sources import missing_message
 from refiner.motion import Motion
 from refiner.safe_pickle import load_pickle
 
@@ -163,7 +164,7 @@ def load_humanact12(path: str | os.PathLike | None = None, *, names: Sequence[st
     if path.is_dir():
         return _humanact12_from_folder(path)
     if not path.is_file():
-        raise ValueError(f"no HumanAct12 data at {str(path)!r}; pass the .npz, a folder of .npy clips or the .pkl.")
+        raise ValueError(missing_message("humanact12", path))
     if path.suffix == ".npz":
         return _humanact12_from_npz(path)
     if path.suffix == ".pkl":
@@ -186,7 +187,7 @@ def load_cmu_mocap(path: str | os.PathLike | None = None, *, units: str = "m") -
         raise ValueError(f"`units` must be 'm' or 'raw'; got {units!r}.")
     path = Path(path) if path is not None else default_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz"
     if not path.is_file():
-        raise ValueError(f"no CMU-Mocap data at {str(path)!r}.")
+        raise ValueError(missing_message("cmu_mocap", path))
     with np.load(path) as d:
         _check_keys(path, d, ("names", "offsets", "joints", "label"))
         joints, offsets, labels = d["joints"], d["offsets"], d["label"]
