@@ -449,12 +449,14 @@ def load_recognizer(
     name_or_path : str or path, default="humanact12"
         A name in :data:`RECOGNIZERS` (``humanact12``, ``humanact12_fine``, ``ntu13``, ``cmu_mocap``),
         read from ``directory`` (the ``.safetensors`` file, else the original ``.tar``), or a path to
-        either kind of file. For a path the recogniser is identified by its weight shapes.
+        either kind of file. For a path the recogniser is identified by its weight shapes. Without
+        ``directory``, ``humanact12`` is the copy shipped in the package (the same tensors,
+        :mod:`refiner.evaluator_weights`).
     hidden : {"random", "fixed", "zeros"}, default="random"
         Initial hidden-state mode, see :class:`ActionRecognizer`.
     random_state : int, default=0
     directory : path, optional
-        Default :func:`evaluators_dir`.
+        Default the shipped copy for ``humanact12``, else :func:`evaluators_dir`.
 
     Returns
     -------
@@ -468,11 +470,17 @@ def load_recognizer(
     """
     name = str(name_or_path)
     if name in RECOGNIZERS:
+        from refiner.evaluator_weights import packaged_recognizer
+
         config, st_file, tar_file = RECOGNIZERS[name]
-        folder = Path(directory) if directory is not None else evaluators_dir()
-        path = folder / st_file if (folder / st_file).is_file() else folder / tar_file
+        path = packaged_recognizer(name) if directory is None else None
+        if path is None:
+            folder = Path(directory) if directory is not None else evaluators_dir()
+            path = folder / st_file if (folder / st_file).is_file() else folder / tar_file
         if not path.is_file():
-            raise ValueError(f"recogniser {name!r} not found: neither {st_file} nor {tar_file} in {str(folder)!r}.")
+            from refiner.data_sources import missing_message
+
+            raise ValueError(f"recogniser {name!r}: " + missing_message("evaluators", folder, (st_file, tar_file)))
         state = load_recognizer_state(path)
     else:
         path = Path(name_or_path)

@@ -20,6 +20,7 @@ __all__ = [
     "CONTENT_KEY",
     "content_sha256",
     "file_sha256",
+    "read_evaluator_manifest",
     "read_generator_manifest",
     "read_refiner_manifest",
     "write_manifest",
@@ -102,6 +103,17 @@ def read_generator_manifest(folder: str | os.PathLike, *, verify: bool = True) -
     """
     folder, manifest, where = _read(folder, "no reference generators")
     return manifest, _check_files(manifest, "generators", folder, where, known=None, verify=verify)
+
+
+def read_evaluator_manifest(folder: str | os.PathLike, *, verify: bool = True) -> tuple[dict, dict[str, Path]]:
+    """The manifest of the packaged-evaluators folder and the path of each recogniser it lists.
+
+    Same checks as :func:`read_generator_manifest` on the ``evaluators`` entry (recogniser name to
+    ``{"file", "sha256", ...}``) and on ``documents`` (the licence text); raises ``ValueError``.
+    """
+    folder, manifest, where = _read(folder, "no packaged evaluators")
+    _check_files(manifest, "documents", folder, where, known=None, verify=verify)
+    return manifest, _check_files(manifest, "evaluators", folder, where, known=None, verify=verify)
 
 
 def _read(folder, missing: str) -> tuple[Path, dict, str]:

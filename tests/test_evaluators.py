@@ -196,3 +196,65 @@ def test_errors_are_clear(tmp_path):
     other.write_bytes(b"")
     with pytest.raises(ValueError, match="unsupported"):
         load_recognizer_state(other)
+
+
+def test_shipped_humanact12_recogniser_is_verified_with_licence_and_provenance():
+    """The packaged copy carries its MIT licence and source in a sha256-checked manifest."""
+    import json
+
+    from refiner.evaluator_weights import EVALUATOR_WEIGHTS_DIR, LICENCE_FILE, packaged_recognizer
+    from refiner.manifest import content_sha256
+
+    path = packaged_recognizer("humanact12")
+    assert path == EVALUATOR_WEIGHTS_DIR / "humanact12_gru.safetensors"
+    manifest = json.loads((EVALUATOR_WEIGHTS_DIR / "manifest.json").read_text())
+    assert manifest["content_sha256"] == content_sha256(manifest)
+    assert "MIT" in manifest["licence"] and "non-commercial" in manifest["licence"]
+    assert manifest["source"]["repository"].endswith("EricGuo5513/action-to-motion")
+    entry = manifest["evaluators"]["humanact12"]
+    # sha256 of Action2Motion's original model_file/action_recognition_model_humanact12.tar
+    assert entry["source_sha256"] == "e2d231fd8a425bc642d4c342466d5eaae2ae16e8a67e8dd253820ef5512d7bca"
+    assert "MIT License" in (EVALUATOR_WEIGHTS_DIR / LICENCE_FILE).read_text()
+    assert packaged_recognizer("ntu13") is None
+
+
+def test_shipped_recogniser_copy_is_refused_when_edited(tmp_path):
+    import shutil
+
+    from refiner.evaluator_weights import EVALUATOR_WEIGHTS_DIR, packaged_recognizer
+
+    folder = tmp_path / "evaluators"
+    shutil.copytree(EVALUATOR_WEIGHTS_DIR, folder)
+    licence = folder / "LICENSE-action-to-motion.txt"
+    licence.write_text(licence.read_text().replace("MIT", "GPL"))
+    with pytest.raises(ValueError, match="does not match the sha256"):
+        packaged_recognizer("humanact12", folder=folder)
+    shutil.copy(EVALUATOR_WEIGHTS_DIR / licence.name, licence)
+    (folder / "humanact12_gru.safetensors").unlink()
+    with pytest.raises(ValueError, match="missing"):
+        packaged_recognizer("humanact12", folder=folder)
+
+
+@pytest.mark.real_data
+def test_shipped_recogniser_gives_the_logits_of_the_shared_original(humanact12):
+    """Same tensors as Action2Motion's .tar in ../shared: identical logits on real clips."""
+    from refiner.evaluator_weights import packaged_recognizer
+
+    shipped = load_recognizer("humanact12", hidden="fixed")  # no directory: the shipped copy
+    assert load_recognizer_state(packaged_recognizer("humanact12")).keys() == shipped.state_dict().keys()
+    original = load_recognizer(_evaluators() / "action_recognition_model_humanact12.tar", hidden="fixed")
+    clips = humanact12.motions[:16]
+    np.testing.assert_array_equal(shipped.predict_logits(clips, crop="start"),
+                                  original.predict_logits(clips, crop="start"))
+    for a, b in zip(shipped.state_dict().values(), original.state_dict().values()):
+        assert torch.equal(a, b)
+
+
+def test_missing_recogniser_message_names_env_files_and_source(tmp_path, monkeypatch):
+    monkeypatch.setenv("MOTION_REFINER_DATA", str(tmp_path / "data"))
+    with pytest.raises(ValueError) as err:
+        load_recognizer("ntu13")
+    msg = str(err.value)
+    for part in ("$MOTION_REFINER_DATA", "ntu13_vibe_gru.safetensors", "action_recognition_model_vibe_v2.tar",
+                 "github.com/EricGuo5513/action-to-motion", str(tmp_path / "evaluators")):
+        assert part in msg, part
