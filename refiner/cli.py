@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from refiner import commands as _cmd
+from refiner import doctor as _doctor
 
 __all__ = ["main", "COMMANDS"]
 
@@ -142,6 +143,8 @@ COMMANDS: dict[str, tuple[str, Callable, Callable]] = {
                _cmd.refine_run),
     "train-generator": ("train a reference generator (a2m or actor) on HumanAct12",
                         _cmd.train_generator_arguments, _cmd.train_generator_run),
+    "doctor": ("show what is installed: weights, evaluators, data found, torch/CUDA, threads",
+               _doctor.doctor_arguments, _doctor.doctor_run),
 }
 
 
