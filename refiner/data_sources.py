@@ -62,7 +62,7 @@ SOURCES: dict[str, DataSource] = {s.name: s for s in (
     DataSource("cmu_mocap", "CMU-Mocap data", "cmu_mocap", ("cmu_mocap_labeled_joints.npz",),
                f"Action2Motion's labelled CMU-Mocap subset ({_A2M_DATA}), from the CMU Graphics Lab Motion "
                "Capture Database (http://mocap.cs.cmu.edu), free for all uses, no resale"),
-    DataSource("evaluators", "Action2Motion recognisers", os.path.join("..", "evaluators"),
+    DataSource("evaluators", "Action2Motion recogniser files", os.path.join("..", "evaluators"),
                ("humanact12_gru.safetensors", "humanact12_fine_gru.safetensors", "ntu13_vibe_gru.safetensors",
                 "cmu_mocap_gru.safetensors"),
                f"Action2Motion's pretrained action recognisers, model_file/action_recognition_model_*.tar in "
@@ -103,7 +103,7 @@ def missing_message(name: str, where: str | os.PathLike, files: tuple[str, ...] 
     expected = " or ".join(files or source.files)
     env = os.environ.get(DATA_ENV)
     env_note = f"${DATA_ENV} is {env!r}" if env else f"${DATA_ENV} is not set"
-    return (f"{source.title} not found at {str(where)!r}: expected {expected} in <data>/{Path(source.folder).as_posix()}, "
+    return (f"no {source.title} at {str(where)!r}: expected {expected} in <data>/{Path(source.folder).as_posix()}, "
             f"where <data> is ${DATA_ENV} ({env_note}; default ../shared/data beside the working directory). "
             f"Source: {source.origin}. Set ${DATA_ENV} or pass the path explicitly.")
 

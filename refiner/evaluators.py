@@ -480,7 +480,7 @@ def load_recognizer(
         if not path.is_file():
             from refiner.data_sources import missing_message
 
-            raise ValueError(f"recogniser {name!r}: " + missing_message("evaluators", folder, (st_file, tar_file)))
+            raise ValueError(f"recogniser {name!r} not found: " + missing_message("evaluators", folder, (st_file, tar_file)))
         state = load_recognizer_state(path)
     else:
         path = Path(name_or_path)
