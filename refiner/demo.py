@@ -113,7 +113,8 @@ def run_demo(
     generator_folder : path, optional
         Folder of generator weights; default the shipped ones.
     recognizer_dir : path, optional
-        Folder of the Action2Motion recognisers; default :func:`refiner.evaluators.evaluators_dir`.
+        Folder of the Action2Motion recognisers; default the HumanAct12 recogniser shipped in the
+        package (:mod:`refiner.evaluator_weights`), so the demo needs no data folder.
     gif_size : int, default=GIF_PANEL_PX
         Edge of each animation panel in pixels (``quick`` draws small ones regardless).
     overwrite : bool, default=False
