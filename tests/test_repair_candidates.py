@@ -1,0 +1,95 @@
+"""Hand-written repairs of flagged runs and the planted-feet evidence they use, on real clips."""
+import numpy as np
+import pytest
+
+from refiner.flaws import foot_sliding, frozen_transition, transition_jitter
+from refiner.foot_contact import planted_feet, planted_slip
+from refiner.pipeline import splice
+from refiner.repair_candidates import (CANDIDATES, planted_feet_run, smooth_run, spline_run, stall_retime_run)
+from refiner.skeletons import get_skeleton
+
+SKEL = get_skeleton("humanact12")
+
+
+def _runs(mask):
+    edges = np.flatnonzero(np.diff(np.r_[False, mask, False].astype(int)))
+    return list(zip(edges[::2], edges[1::2]))
+
+
+def _repaired(fn, flawed, mask):
+    out = flawed.copy()
+    for lo, hi in _runs(mask):
+        out = splice(out, fn(out, lo, hi, SKEL), lo, hi, blend=4, keep_start=lo > 0, keep_end=hi < len(out))
+    return out
+
+
+def _err(a, b):
+    return 100 * float(np.linalg.norm(a - b, axis=-1).mean())
+
+
+@pytest.fixture(scope="module")
+def walks(humanact12):
+    """Twelve real clips of the first action (warm-up: the feet stay on the ground), 60+ frames."""
+    idx = [i for i in np.flatnonzero(humanact12.actions == 0) if humanact12[int(i)].n_frames >= 60][:12]
+    return [humanact12[int(i)] for i in idx]
+
+
+@pytest.mark.real_data
+def test_planted_feet_and_slip_on_real_clips(walks):
+    clip = walks[0].joints
+    planted = planted_feet(clip, "humanact12")
+    assert planted.shape == (len(clip), 2) and planted.any(0).all()  # each foot touches down
+    slip = planted_slip(clip, "humanact12")
+    assert slip.shape == (len(clip) - 1, 3)
+    assert np.abs(slip @ SKEL.up_vector).max() < 1e-9  # horizontal only
+    moved = clip + np.array([0.0, 0.0, 0.01]) * np.arange(len(clip))[:, None, None]  # the whole body glides 1 cm/frame
+    glide = planted_slip(moved, "humanact12")
+    has = planted_feet(moved, "humanact12")[1:].any(1) & planted_feet(moved, "humanact12")[:-1].any(1)
+    np.testing.assert_allclose(glide[has] - slip[has], np.array([0.0, 0.0, 0.01])[None].repeat(has.sum(), 0), atol=1e-9)
+
+
+@pytest.mark.real_data
+def test_planted_feet_run_undoes_a_glide_and_leaves_clean_clips(walks):
+    before, after, clean_moved = [], [], []
+    for i, m in enumerate(walks):
+        c = foot_sliding(m, 2, random_state=i)
+        fixed = _repaired(planted_feet_run, c.motion.joints, c.mask)
+        before.append(_err(c.motion.joints, m.joints))
+        after.append(_err(fixed, m.joints))
+        lo, hi = _runs(c.mask)[0]
+        clean_moved.append(_err(planted_feet_run(m.joints, lo, hi, SKEL), m.joints))
+    assert np.mean(after) < 0.5 * np.mean(before)  # more than half of the glide's error removed
+    assert np.mean(clean_moved) < 0.1 * np.mean(before)
+
+
+@pytest.mark.real_data
+def test_stall_retime_fixes_stalls_and_leaves_moving_runs(walks):
+    before, after = [], []
+    for i, m in enumerate(walks):
+        c = frozen_transition(m, 2, random_state=i)
+        before.append(_err(c.motion.joints, m.joints))
+        after.append(_err(_repaired(stall_retime_run, c.motion.joints, c.mask), m.joints))
+        lo, hi = _runs(c.mask)[0]
+        assert np.array_equal(stall_retime_run(m.joints, lo, hi, SKEL), m.joints) or _err(
+            stall_retime_run(m.joints, lo, hi, SKEL), m.joints) < 0.5  # a real run rarely stalls
+    assert np.mean(after) < 0.75 * np.mean(before)
+
+
+@pytest.mark.real_data
+def test_smoothing_repairs_remove_jitter(walks):
+    for fn in (smooth_run, spline_run):
+        before, after = [], []
+        for i, m in enumerate(walks[:6]):
+            c = transition_jitter(m, 2, random_state=i)
+            before.append(_err(c.motion.joints, m.joints))
+            after.append(_err(_repaired(fn, c.motion.joints, c.mask), m.joints))
+        assert np.mean(after) < 0.9 * np.mean(before), fn.__name__
+
+
+def test_candidates_touch_only_their_run(rng):
+    y = np.cumsum(rng.normal(0, 0.01, (40, 24, 3)), 0).astype(np.float32)
+    for name, fn in CANDIDATES.items():
+        out = fn(y, 10, 20, SKEL)
+        assert out.shape == y.shape and out.dtype == y.dtype, name
+        assert np.array_equal(out[:9], y[:9]) and np.array_equal(out[21:], y[21:]), name
+        assert np.array_equal(fn(y, 10, 11, SKEL)[:9], y[:9]), name
