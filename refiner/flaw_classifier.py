@@ -17,6 +17,7 @@ from torch import nn
 from refiner.components import NOT_FITTED, NetworkComponent
 from refiner.flaw_features import N_FEATURES, flaw_features
 from refiner.flaw_training import FLAW_LABEL_CM, IGNORE_BELOW_CM
+from refiner.skeletons import rigid_skeleton
 from refiner.training import fit_network, resolve_device, seeded
 from refiner.training_flaws import GROUPS, synthesize
 from refiner.validation import check_is_fitted, check_random_state
@@ -54,6 +55,10 @@ class FlawClassifier(NetworkComponent):
         Flawed versions of each training clip (random mechanisms, see :func:`refiner.training_flaws.synthesize`).
     crop : int, default=64
         Training crop length.
+    rigid_tolerance : float or None, default=0.005
+        The refiner puts a clip whose bones vary more than this on rigid bones before detection
+        (:func:`refiner.skeletons.rigid_skeleton`), so training crops get the same
+        treatment after their flaws (None: not); the labels are what is left of the flaw.
     n_epochs, batch_size, learning_rate, patience, steps_per_epoch, max_seconds, device, random_state, verbose
 
     Attributes
@@ -71,7 +76,7 @@ class FlawClassifier(NetworkComponent):
     _fitted_arrays = ("mean_", "scale_")
 
     def __init__(self, *, hidden: int = 64, n_layers: int = 4, kernel: int = 5, dropout: float = 0.1, copies: int = 8,
-                 crop: int = 64, n_epochs: int = 30, batch_size: int = 64, learning_rate: float = 1e-3,
+                 crop: int = 64, rigid_tolerance: float | None = 0.005, n_epochs: int = 30, batch_size: int = 64, learning_rate: float = 1e-3,
                  patience: int = 8, steps_per_epoch: int | None = 100, max_seconds: float | None = None,
                  device: str = "auto", random_state: int | None = 0, verbose: bool = False):
         self.hidden = hidden
@@ -80,6 +85,7 @@ class FlawClassifier(NetworkComponent):
         self.dropout = dropout
         self.copies = copies
         self.crop = crop
+        self.rigid_tolerance = rigid_tolerance
         self.n_epochs = n_epochs
         self.batch_size = batch_size
         self.learning_rate = learning_rate
@@ -108,9 +114,12 @@ class FlawClassifier(NetworkComponent):
                     continue
                 donor = clips[int(rng.integers(len(clips)))]
                 flaw = synthesize(crop, rng, skeleton=self.skeleton_, donors=[donor], clean_probability=0.3)
-                disp = 100 * np.linalg.norm(flaw.joints - crop, axis=-1).mean(-1)
+                flawed = flaw.joints
+                if self.rigid_tolerance is not None:
+                    flawed = rigid_skeleton(flawed, self.skeleton_, self.rigid_tolerance)[0]
+                disp = 100 * np.linalg.norm(flawed - crop, axis=-1).mean(-1)
                 m = len(crop)
-                feats[k, :m] = flaw_features(flaw.joints, self.skeleton_)
+                feats[k, :m] = flaw_features(flawed, self.skeleton_)
                 feats[k, m:] = feats[k, m - 1]
                 label[k, :m, 0] = disp > FLAW_LABEL_CM
                 label[k, :m, 1:] = flaw.group_touched & (disp > FLAW_LABEL_CM)[:, None]

@@ -17,6 +17,7 @@ __all__ = [
     "list_skeletons",
     "register_skeleton",
     "bone_lengths",
+    "rigid_skeleton",
 ]
 
 
@@ -245,3 +246,31 @@ register_skeleton(Skeleton(
     "cmu_mocap", _CMU_NAMES, _CMU_PARENTS, up="+y", forward="+z",
     description="Action2Motion's CMU-Mocap subset, 20 joints, y up; loaded in metres.",
 ))
+
+
+def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, iterations: int = 60) -> tuple[np.ndarray, float]:
+    """Joints ``(T, J, 3)`` put on their median bone lengths when any bone's length varies (std / mean)
+    by more than ``tolerance``; returns ``(joints, worst variation)`` (joints unchanged below it).
+
+    The lengths are enforced by moving both ends of every bone toward its length (Jacobi
+    iterations of a constraint projection), which spreads each correction over the joints next to
+    the bone; rebuilding the skeleton outward from the root instead carries every correction on to
+    all descendants (it raised the error of drifting joints from 3.8 to 5.3 cm).
+    """
+    lengths = bone_lengths(joints, skeleton)
+    variation = float((lengths.std(0) / np.maximum(lengths.mean(0), 1e-9)).max())
+    if variation <= tolerance:
+        return joints, variation
+    bones = get_skeleton(skeleton).bones
+    target = np.median(lengths, axis=0)  # (J-1,)
+    x = joints.astype(np.float64).copy()
+    count = np.bincount(bones.ravel(), minlength=x.shape[1]).astype(np.float64)[None, :, None]
+    for _ in range(iterations):
+        d = x[:, bones[:, 1]] - x[:, bones[:, 0]]  # (T, B, 3)
+        norm = np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-9)
+        corr = 0.5 * (norm - target[None, :, None]) / norm * d
+        move = np.zeros_like(x)
+        np.add.at(move, (slice(None), bones[:, 0]), corr)
+        np.add.at(move, (slice(None), bones[:, 1]), -corr)
+        x += 1.5 * move / count  # over-relaxed: converges in far fewer sweeps
+    return x.astype(joints.dtype), variation

@@ -4,7 +4,8 @@ import pytest
 import torch
 
 from refiner.flaw_networks import FlawRepairNet, FrameTransformerConfig, linear_infill, window_starts
-from refiner.learned_pipeline import flag_runs, rigid_skeleton
+from refiner.learned_pipeline import flag_runs
+from refiner.skeletons import rigid_skeleton
 from refiner.physics import bone_length_variation
 from refiner.pipeline import Refiner
 from refiner.skeletons import joint_bone_lengths, with_bone_lengths
@@ -206,3 +207,23 @@ def test_flaw_classifier_tiny_fit_and_calibration(tiny_learned, humanact12):
 
     flagged = np.mean([_run_peak(clf.predict(c[None])[0], 2) > th for c in clips])
     assert th == clf.threshold_ and flagged <= 0.1 + 1e-9  # at most the asked share of clean clips
+
+
+@pytest.mark.real_data
+def test_flaw_classifier_trains_on_crops_made_rigid_like_the_refiner_sees_them(humanact12):
+    """With ``rigid_tolerance`` the flawed training crops are put on rigid bones first (so their
+    bone-deviation features are small), and the labels are what is left of each flaw."""
+    from refiner.flaw_classifier import FlawClassifier
+
+    clips = [m.joints for m in humanact12.subset(range(0, 240, 20))]
+    feats = {}
+    for tol in (None, 0.005):
+        clf = FlawClassifier(copies=6, rigid_tolerance=tol, random_state=0)
+        clf.skeleton_ = "humanact12"
+        feats[tol] = clf._examples(clips, np.random.default_rng(3), 6)
+    assert feats[None]["feats"].shape == feats[0.005]["feats"].shape
+    dev_raw, dev_rigid = feats[None]["feats"][..., 9].max(1), feats[0.005]["feats"][..., 9].max(1)  # bone dev. max
+    stretched = dev_raw > 0.5  # crops whose flaws changed some bone by more than 5 %
+    assert stretched.sum() >= 5
+    assert np.median(dev_rigid[stretched]) < 0.2 * np.median(dev_raw[stretched])
+    assert feats[0.005]["label"][..., 0].sum() <= feats[None]["label"][..., 0].sum()  # some flaw removed by rigidity
