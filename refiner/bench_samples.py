@@ -54,7 +54,9 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool) -> str:
     folder = (default_data_dir() if data is None else Path(data)).parent / "samples" / "action2motion"
     path, labels_path = folder / "humanact12_xyz_vae_samples.npy", folder / "humanact12_xyz_vae_labels.npy"
     if not path.is_file():
-        return f"## Real generator samples\n\n(real Action2Motion samples not found at {path}; skipped)"
+        from refiner.data_sources import missing_message
+
+        return f"## Real generator samples\n\n({missing_message('samples', path)}; skipped)"
     labels = np.load(labels_path).astype(np.int64).ravel()
     before = convert("action2motion", np.load(path), representation="xyz", recenter=True)
     if quick:
