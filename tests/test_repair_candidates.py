@@ -93,3 +93,31 @@ def test_candidates_touch_only_their_run(rng):
         assert out.shape == y.shape and out.dtype == y.dtype, name
         assert np.array_equal(out[:9], y[:9]) and np.array_equal(out[21:], y[21:]), name
         assert np.array_equal(fn(y, 10, 11, SKEL)[:9], y[:9]), name
+
+
+class _Judge:
+    """A flaw classifier stand-in whose flaw probability rises (or falls) with the distance from ``ref``."""
+
+    def __init__(self, ref, sign):
+        self.ref, self.sign = ref, sign
+
+    def predict(self, clips):
+        return 0.5 + self.sign * np.linalg.norm(clips - self.ref, axis=-1).mean(-1)
+
+
+@pytest.mark.parametrize("sign, expected", [(1.0, "keep"), (-1.0, "smooth")])
+def test_verified_typed_repair_is_kept_only_when_it_looks_more_real(rng, sign, expected):
+    from types import SimpleNamespace
+
+    import refiner.learned_pipeline as lp
+
+    y = (np.cumsum(rng.normal(0, 0.01, (40, 24, 3)), 0) + rng.normal(0, 0.01, (40, 24, 3))).astype(np.float32)
+    groups = np.zeros((40, 4))
+    groups[:, list(lp.TYPED_REPAIRS).index("noise")] = 0.9
+    refiner = SimpleNamespace(repair="typed", blend=4, change_penalty=0.0, flaw_classifier=_Judge(y, sign),
+                              skeleton="humanact12")
+    assert "noise" in lp.VERIFY_TYPED and lp.TYPED_REPAIRS["noise"][0] == "smooth"
+    name, (lo, hi), out, note = lp._repair_run(refiner, y, 10, 20, {}, groups, y, SKEL)
+    assert name == expected and (lo, hi) == (10, 20)
+    assert np.array_equal(out, y) == (expected == "keep")
+    assert np.array_equal(out[:9], y[:9]) and np.array_equal(out[21:], y[21:])
