@@ -1,17 +1,34 @@
 """``motion-refiner bench``: benchmarks that print figures (speed and quality targets live here).
 
 Every suite is a function ``(data_dir, out_dir, quick) -> str`` returning a Markdown section that
-is printed as it is produced and, with ``--out``, collected into ``REPORT.md``.
+is printed as it is produced and, with ``--out``, collected into ``REPORT.md``; with ``--out`` each
+suite also writes its figures as ``<suite>.json`` (:func:`write_record`), the numbers of its tables.
+``refiner``/``speed``, ``flaws`` and ``samples`` live in :mod:`refiner.bench_refiner`,
+:mod:`refiner.bench_flaws` and :mod:`refiner.bench_samples`, imported on first use.
 """
 from __future__ import annotations
 
+import importlib
+import json
 import time
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-__all__ = ["SUITES", "run_benchmarks", "markdown_table"]
+__all__ = ["SUITES", "run_benchmarks", "markdown_table", "write_record", "one_thread"]
+
+#: suites kept in their own modules (they import this one): function name -> module
+_ELSEWHERE = {"bench_refiner": "refiner.bench_refiner", "bench_speed": "refiner.bench_refiner",
+              "bench_flaws": "refiner.bench_flaws", "bench_samples": "refiner.bench_samples"}
+
+
+def __getattr__(name: str):
+    """``refiner.bench.bench_refiner`` and the other moved suites, imported on first use."""
+    if name in _ELSEWHERE:
+        return getattr(importlib.import_module(_ELSEWHERE[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def markdown_table(header: list[str], rows: list[list]) -> str:
@@ -21,6 +38,14 @@ def markdown_table(header: list[str], rows: list[list]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def write_record(out: Path | None, suite: str, record: dict) -> dict:
+    """Write a suite's figures as ``<suite>.json`` in ``out`` (nothing when ``out`` is None); returns ``record``."""
+    if out is not None:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        (Path(out) / f"{suite}.json").write_text(json.dumps(record, indent=1))
+    return record
 
 
 def bench_concepts(data: Path | None, out: Path | None, quick: bool) -> str:
@@ -44,7 +69,8 @@ def bench_concepts(data: Path | None, out: Path | None, quick: bool) -> str:
     print(lines[-1], flush=True)
 
     paper = {100: (0.89, "97.7%"), 200: (0.94, "98.6%"), 300: (1.08, "98.3%"), 400: (1.22, "97.1%")}
-    rows = []
+    rec = {"clips": len(dataset), "frames": dataset.n_frames, "penalty": DEFAULT_PENALTY,
+           "segment_seconds": seconds, "penalties": [], "kmeans": []}
     for lam in (100.0, 200.0, 300.0, 400.0):
         seg_l = segs if lam == DEFAULT_PENALTY else [segment(m.joints, penalty=lam) for m in dataset]
         n_trans = np.array([s.n_transitions for s in seg_l])
@@ -53,28 +79,36 @@ def bench_concepts(data: Path | None, out: Path | None, quick: bool) -> str:
         overall = 100 * np.concatenate([e.ravel() for e in err]).mean()
         per_action = [100 * np.concatenate([e.ravel() for e, m in zip(err, dataset) if m.action == a]).mean()
                       for a in np.unique(dataset.actions)]
-        rows.append([f"{lam:g}", float(n_trans.mean()), float(durations.mean()), float(overall),
-                     float(np.mean(per_action)), paper[int(lam)][0]])
-        print(f"  λ={lam:g}: {rows[-1][1]:.2f} transitions/clip, {rows[-1][2]:.1f} frames each, "
-              f"MPJPE {overall:.3f} cm", flush=True)
+        r = {"penalty": lam, "transitions_per_clip": float(n_trans.mean()),
+             "mean_transition_frames": float(durations.mean()), "mpjpe_cm": float(overall),
+             "mpjpe_mean_of_actions_cm": float(np.mean(per_action)), "paper_mpjpe_cm": paper[int(lam)][0]}
+        rec["penalties"].append(r)
+        print(f"  λ={lam:g}: {r['transitions_per_clip']:.2f} transitions/clip, {r['mean_transition_frames']:.1f} "
+              f"frames each, MPJPE {overall:.3f} cm", flush=True)
+    rows = [[f"{r['penalty']:g}", r["transitions_per_clip"], r["mean_transition_frames"], r["mpjpe_cm"],
+             r["mpjpe_mean_of_actions_cm"], r["paper_mpjpe_cm"]] for r in rec["penalties"]]
     lines += ["", "λ in cm² per joint (see `refiner.segmentation`). MPJPE of the spline reconstruction, cm.", "",
               markdown_table(["λ", "transitions / clip", "mean transition frames", "MPJPE (all frames)",
                               "MPJPE (mean of actions)", "paper Table 2 MPJPE"], rows)]
 
-    krows = []
+    ks = (2, 4, 8, 12, 16)
     for a in np.unique(dataset.actions):
         poses = np.concatenate([root_relative(m.joints[s.anchors]) for s, m in zip(segs, dataset) if m.action == a])
         flat = poses.reshape(len(poses), -1)
-        row = [dataset.action_names[a], len(poses)]
-        for k in (2, 4, 8, 12, 16):
+        dist = {}
+        for k in ks:
             if k > len(flat):
-                row.append("-")
+                dist[str(k)] = None
                 continue
             km = KMeans(k, n_init=2, random_state=0).fit(flat)
-            row.append(float(100 * np.linalg.norm(poses - km.cluster_centers_[km.labels_].reshape(poses.shape), axis=-1).mean()))
-        krows.append(row)
+            dist[str(k)] = float(100 * np.linalg.norm(poses - km.cluster_centers_[km.labels_].reshape(poses.shape),
+                                                      axis=-1).mean())
+        rec["kmeans"].append({"action": dataset.action_names[a], "anchors": len(poses), "distance_cm": dist})
+    krows = [[r["action"], r["anchors"]] + ["-" if v is None else v for v in r["distance_cm"].values()]
+             for r in rec["kmeans"]]
     lines += ["", "Anchor K-means: mean joint distance to the assigned centre (cm) by number of clusters.", "",
-              markdown_table(["action", "anchors", "k=2", "k=4", "k=8", "k=12", "k=16"], krows)]
+              markdown_table(["action", "anchors"] + [f"k={k}" for k in ks], krows)]
+    write_record(out, "concepts", rec)
     return "\n".join(lines)
 
 
@@ -89,6 +123,33 @@ def _humanact12_and_recognizer(data: Path | None, *, hidden: str):
     return dataset, recognizer
 
 
+def _metrics(summary: dict) -> dict:
+    """An evaluation summary as JSON: metric -> ``[mean, 95 % half-width]``."""
+    return {k: [float(m), float(h)] for k, (m, h) in summary.items()}
+
+
+def _pm(value: list, scale: float = 1.0, spec: str = ".3f") -> str:
+    """``[mean, half-width]`` as the tables print it, ``mean ± half-width``."""
+    return f"{scale * value[0]:{spec}} ± {scale * value[1]:{spec}}"
+
+
+@contextmanager
+def one_thread():
+    """Torch and BLAS on one thread, restored after; also a decorator. The networks are small: one
+    thread is several times faster on CPU, and on a busy machine two can be 30-100 times slower."""
+    import torch
+    from threadpoolctl import threadpool_limits
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with threadpool_limits(1):
+            yield
+    finally:
+        torch.set_num_threads(threads)
+
+
+@one_thread()
 def bench_sanity(data: Path | None, out: Path | None, quick: bool) -> str:
     """Real held-out clips through the evaluation protocol: FID near zero and the recogniser's accuracy."""
     from refiner.metrics import evaluate
@@ -101,7 +162,8 @@ def bench_sanity(data: Path | None, out: Path | None, quick: bool) -> str:
              f"Action2Motion protocol: {n} random 60-frame crops per side (with replacement), fresh N(0,1) GRU "
              f"hidden state per replication, {n_rep} replications, mean ± 1.96·σ/√R. 'matched' draws the "
              "reference crops with the same action mixture.", ""]
-    rows = []
+    rec = {"test_clips": len(test), "train_clips": len(train), "n_replications": n_rep, "n_crops": n,
+           "comparisons": {}}
     for label, gen, ref, match in (("test vs train", test, train, False),
                                    ("test vs train, matched", test, train, True),
                                    ("train vs train, matched (floor)", train, train, True)):
@@ -109,20 +171,20 @@ def bench_sanity(data: Path | None, out: Path | None, quick: bool) -> str:
         ev = evaluate(recognizer, gen.motions, ref.motions, n_replications=n_rep, n_generated=n, n_real=n,
                       match_labels=match, random_state=0)
         s = ev.summary()
-        rows.append([label, f"{s['fid'][0]:.3f} ± {s['fid'][1]:.3f}",
-                     f"{100 * s['accuracy'][0]:.1f} ± {100 * s['accuracy'][1]:.1f}"]
-                    + [f"{s[k][0]:.3f} ± {s[k][1]:.3f}" for k in ("diversity", "multimodality", "real_diversity")]
-                    + [f"{time.perf_counter() - t0:.1f}"])
+        rec["comparisons"][label] = {"metrics": _metrics(s), "seconds": time.perf_counter() - t0}
         print(f"  {label}: FID {s['fid'][0]:.3f}, accuracy {100 * s['accuracy'][0]:.1f} %", flush=True)
+    rows = [[label, _pm(c["metrics"]["fid"]), _pm(c["metrics"]["accuracy"], 100, ".1f")]
+            + [_pm(c["metrics"][k]) for k in ("diversity", "multimodality", "real_diversity")] + [f"{c['seconds']:.1f}"]
+            for label, c in rec["comparisons"].items()]
+    write_record(out, "sanity", rec)
     lines.append(markdown_table(["comparison", "FID", "accuracy %", "diversity", "multimodality",
                                  "reference diversity", "seconds"], rows))
     return "\n".join(lines)
 
 
+@one_thread()
 def bench_generators(data: Path | None, out: Path | None, quick: bool) -> str:
     """The shipped reference generators' samples before and after refinement, scored by the HumanAct12 recogniser."""
-    import torch
-
     from refiner.pipeline import Refiner
 
     dataset, recognizer = _humanact12_and_recognizer(data, hidden="random")
@@ -130,17 +192,10 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool) -> str:
     refiner = Refiner.pretrained("humanact12", split="train")
     # the paper's Table 1 protocol: 3,000 samples (250 per action), 20 replications
     per_action, n_rep = (3, 2) if quick else (250, 20)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # small networks: one thread is several times faster on CPU
-    try:
-        return _bench_generators(dataset, recognizer, real, refiner, per_action, n_rep, out)
-    finally:
-        torch.set_num_threads(threads)
+    return _bench_generators(dataset, recognizer, real, refiner, per_action, n_rep, out)
 
 
 def _bench_generators(dataset, recognizer, real, refiner, per_action: int, n_rep: int, out: Path | None) -> str:
-    import json
-
     from refiner.metrics import evaluate
     from refiner.reference_generators import GENERATOR_KINDS, load_reference_generator
 
@@ -152,7 +207,7 @@ def _bench_generators(dataset, recognizer, real, refiner, per_action: int, n_rep
              "`Refiner.pretrained(split=\"train\")`. Metrics follow the Action2Motion protocol "
              f"(`refiner.metrics.evaluate`, random GRU hidden state, {n_rep} replications, mean ± 95 % interval), "
              "real crops drawn with the generated action mixture. Accuracy is the recogniser's on the samples.", ""]
-    rows, records = [], {}
+    rec = {"per_action": per_action, "n_replications": n_rep, "reference_clips": len(real), "rows": {}}
     for kind in GENERATOR_KINDS:
         gen = load_reference_generator(kind)
         before = [m for a in range(n_actions)
@@ -162,194 +217,48 @@ def _bench_generators(dataset, recognizer, real, refiner, per_action: int, n_rep
                                          return_report=True)
         seconds = time.perf_counter() - t0
         after = [m.with_joints(j) for m, j in zip(before, joints)]
-        changed = float(np.mean([r.changed_frames.mean() for r in reports]))
-        flagged = float(np.mean([len(r.flagged_anchors) for r in reports]))
         for label, motions in (("generated", before), ("refined", after)):
             s = evaluate(recognizer, motions, real.motions, n_replications=n_rep, match_labels=True,
                          random_state=0).summary()
-            row = [kind, label, f"{100 * s['accuracy'][0]:.1f} ± {100 * s['accuracy'][1]:.1f}",
-                   f"{s['fid'][0]:.3f} ± {s['fid'][1]:.3f}", f"{s['diversity'][0]:.3f}",
-                   f"{s['multimodality'][0]:.3f}"]
-            row += [f"{100 * changed:.1f}", f"{flagged:.2f}", f"{seconds / len(before):.2f}"] if label == "refined" \
-                else ["", "", ""]
-            rows.append(row)
-            records[f"{kind}/{label}"] = {k: list(v) for k, v in s.items()}
+            row = rec["rows"][f"{kind}/{label}"] = {"samples": len(motions), "metrics": _metrics(s)}
+            if label == "refined":
+                row.update(frames_changed=float(np.mean([r.changed_frames.mean() for r in reports])),
+                           flagged_anchors_per_clip=float(np.mean([len(r.flagged_anchors) for r in reports])),
+                           refine_seconds_per_clip=seconds / len(before))
             print(f"  {kind} {label}: accuracy {100 * s['accuracy'][0]:.1f} %, FID {s['fid'][0]:.3f}", flush=True)
     s = evaluate(recognizer, dataset.split("train").motions, real.motions, n_replications=n_rep,
                  n_generated=per_action * n_actions, match_labels=True, random_state=0).summary()
-    rows.append(["real clips (subjects 1-10)", "real", f"{100 * s['accuracy'][0]:.1f} ± {100 * s['accuracy'][1]:.1f}",
-                 f"{s['fid'][0]:.3f} ± {s['fid'][1]:.3f}", f"{s['diversity'][0]:.3f}", f"{s['multimodality'][0]:.3f}",
-                 "", "", ""])
+    rec["rows"]["real"] = {"samples": per_action * n_actions, "metrics": _metrics(s)}
+    rows = []
+    for key, r in rec["rows"].items():
+        m = r["metrics"]
+        rows.append(["real clips (subjects 1-10)", "real"] if key == "real" else key.split("/"))
+        rows[-1] += [_pm(m["accuracy"], 100, ".1f"), _pm(m["fid"]), f"{m['diversity'][0]:.3f}",
+                     f"{m['multimodality'][0]:.3f}"]
+        rows[-1] += [f"{100 * r['frames_changed']:.1f}", f"{r['flagged_anchors_per_clip']:.2f}",
+                     f"{r['refine_seconds_per_clip']:.2f}"] if "frames_changed" in r else ["", "", ""]
     lines.append(markdown_table(["generator", "samples", "accuracy %", "FID", "diversity", "multimodality",
                                  "frames changed %", "flagged anchors / clip", "refine s / clip"], rows))
-    if out is not None:
-        Path(out).mkdir(parents=True, exist_ok=True)
-        (Path(out) / "generators.json").write_text(json.dumps(records, indent=1))
+    write_record(out, "generators", rec)
     return "\n".join(lines)
 
 
-def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
-    """Issue-3 figures for the shipped subject-1-10 weights on held-out subjects 11-12.
+def _moved(name: str) -> Callable[..., str]:
+    """A suite in another module (see ``_ELSEWHERE``), imported when it runs."""
+    def run(data: Path | None, out: Path | None, quick: bool, **kwargs) -> str:
+        return __getattr__(name)(data, out, quick, **kwargs)
 
-    (a) how much real clips change, (b) velocity jumps where refined windows meet kept frames
-    against real data's 99th percentile, (c) anchor recognition precision / recall against the
-    segmentation, (d) refine latency per 60-frame clip (CPU, batch 1), parameter counts, and the
-    anchor-quality comparison behind the ``quality`` default (pose mixture vs the paper's
-    encoder-feature GMM, ROC AUC on seeded anchor flaws).
-    """
-    import torch
-    from sklearn.metrics import roc_auc_score
-
-    from refiner.datasets import load_humanact12
-    from refiner.flaws import corrupt
-    from refiner.physics import boundary_velocity_jump
-    from refiner.pipeline import Refiner
-    from refiner.recognition import match_anchors
-    from refiner.segmentation import segment
-
-    dataset = load_humanact12(None if data is None else Path(data) / "humanact12" / "humanact12_joints.npz")
-    test = dataset.split("test")
-    clips = test.motions[:: (16 if quick else 1)]
-    model = Refiner.pretrained("humanact12", split="train")
-    lines = [f"## Refiner (shipped subject-1-10 weights, {len(clips)} held-out clips of subjects 11-12)", ""]
-    counts = model.n_parameters()
-    lines.append("Parameters: " + ", ".join(f"{k} {v:,}" for k, v in counts.items()) + " (paper: 6.23 M).")
-
-    segs = [segment(m.joints) for m in clips]
-    change, frames, n_changed, tp, n_pred, n_ref = 0.0, 0, 0, 0, 0, 0
-    jumps, refs = [], []
-    for m, seg in zip(clips, segs):
-        out, report = model.refine(m, return_report=True)
-        err = np.linalg.norm(out.joints - m.joints, axis=-1).mean(-1)
-        change, frames = change + err.sum(), frames + m.n_frames
-        n_changed += bool(report.changes)
-        counts_ = match_anchors(report.anchors, seg.anchors)
-        tp, n_pred, n_ref = tp + counts_[0], n_pred + counts_[1], n_ref + counts_[2]
-    real_acc = np.concatenate([np.linalg.norm(np.diff(m.joints, 2, axis=0), axis=-1).max(-1) * m.fps ** 2
-                               for m in clips])
-    # window boundaries need changes: refine clips with seeded anchor flaws and measure every splice
-    for i, (m, seg) in enumerate(zip(clips, segs)):
-        bad = corrupt(m, "anchor_drift", 3, random_state=i, segmentation=seg).motion
-        out, report = model.refine(bad, return_report=True)
-        mask = report.changed_frames
-        if mask.any() and not mask.all():
-            jump = boundary_velocity_jump(out, mask)
-            jumps.append(jump.jump * m.fps)  # m/s per frame -> m/s²
-    p99 = float(np.percentile(real_acc, 99))
-    lines += ["", markdown_table(["figure", "value", "target"], [
-        ["(a) real clips: MPJPE change (cm)", float(100 * change / frames), "< 0.3"],
-        ["(a) real clips changed at all", f"{n_changed} / {len(clips)}", ""],
-        ["(b) largest boundary acceleration (m/s²), refined drifted clips",
-         float(max(jumps)) if jumps else "no boundary", f"real p99 {p99:.1f}"],
-        ["(b) median boundary acceleration (m/s²)", float(np.median(jumps)) if jumps else "-", ""],
-        ["(b) boundaries above real p99", f"{int(np.sum(np.array(jumps) > p99))} / {len(jumps)}", ""],
-        ["(c) anchor recognition precision (±2 frames)", float(tp / max(n_pred, 1)), ""],
-        ["(c) anchor recognition recall (±2 frames)", float(tp / max(n_ref, 1)), ""],
-    ])]
-    print(lines[-1], flush=True)
-
-    window = [m.joints[:60] for m in clips if m.n_frames >= 60][: (5 if quick else 50)]
-    for x in window[:3]:
-        model.refine(x)  # warm up
-    times = []
-    for x in window:
-        t0 = time.perf_counter()
-        model.refine(x)
-        times.append(time.perf_counter() - t0)
-    lines += ["", f"(d) refine latency per 60-frame clip, CPU batch 1 ({torch.get_num_threads()} threads, "
-                  f"{len(times)} clips): median **{1000 * np.median(times):.1f} ms**, "
-                  f"90th percentile {1000 * np.percentile(times, 90):.1f} ms (paper: 17 ms on a GPU)."]
-    print(lines[-1], flush=True)
-
-    rows = []
-    rng = np.random.default_rng(0)
-    for family in ("anchor_drift", "wrong_anchor"):
-        labels, pose_s, enc_s = [], [], []
-        for i, (m, seg) in enumerate(zip(clips, segs)):
-            a = seg.anchors
-            if len(a) < 3:
-                continue
-            donors = [d for d in test.motions if d.action == m.action and d is not m][:5]
-            bad = corrupt(m, family, 2, random_state=i, donors=donors, segmentation=seg).motion
-            shift = np.linalg.norm(bad.joints - m.joints, axis=-1).mean(-1)[a]
-            k_bad = int(np.argmax(shift[1:-1])) + 1
-            k_real = int(rng.integers(1, len(a) - 1))
-            for clip, k, label in ((m.joints, k_real, 0), (bad.joints, k_bad, 1)):
-                labels.append(label)
-                pose_s.append(-model.anchor_quality.score(clip[a[k]][None], m.action)[0])
-                enc_s.append(-model.recognizer.recognize(clip, anchors=a).scores[k])
-        rows.append([family, float(roc_auc_score(labels, pose_s)), float(roc_auc_score(labels, enc_s))])
-    lines += ["", "Anchor quality scores, ROC AUC separating a seeded flawed anchor (severity 2) from a real one:", "",
-              markdown_table(["flaw", "pose mixture (default)", "encoder-feature GMM (paper)"], rows)]
-    return "\n".join(lines)
-
-
-def bench_speed(data: Path | None, out: Path | None, quick: bool) -> str:
-    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters, CPU and CUDA."""
-    import resource
-
-    import torch
-
-    from refiner.datasets import load_humanact12
-    from refiner.pipeline import Refiner
-
-    dataset = load_humanact12(None if data is None else Path(data) / "humanact12" / "humanact12_joints.npz")
-    clips = [m.joints[:60] for m in dataset.split("test") if m.n_frames >= 60][: (8 if quick else 64)]
-    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
-    rows = []
-    for device in devices:
-        model = Refiner.load(Path(__file__).resolve().parent / "weights" / "humanact12-train", device=device)
-        for x in clips[:3]:
-            model.refine(x)  # warm up (first calls allocate and compile kernels)
-        times = []
-        for x in clips:
-            t0 = time.perf_counter()
-            model.refine(x)
-            if device == "cuda":
-                torch.cuda.synchronize()
-            times.append(time.perf_counter() - t0)
-        batch = np.stack([clips[i % len(clips)] for i in range(8 if quick else 256)])
-        model.refine(batch[:8])
-        runs = []
-        for _ in range(1 if quick else 3):  # the median of three calls: one call is at the mercy of the machine
-            t0 = time.perf_counter()
-            model.refine(batch)
-            runs.append(time.perf_counter() - t0)
-        throughput = len(batch) / float(np.median(runs))
-        peak = (torch.cuda.max_memory_allocated() / 2**20 if device == "cuda"
-                else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
-        rows.append([device, f"{torch.get_num_threads()} threads" if device == "cpu" else torch.cuda.get_device_name(),
-                     float(1000 * np.median(times)), float(1000 * np.percentile(times, 90)), float(throughput),
-                     f"{peak:.0f} MiB" + (" (process RSS)" if device == "cpu" else " (CUDA)")])
-        print(f"  {device}: median {rows[-1][2]:.1f} ms per 60-frame clip", flush=True)
-    counts = Refiner.pretrained("humanact12", split="train").n_parameters()
-    return "\n".join([
-        f"## Speed ({len(clips)} held-out 60-frame clips; paper: 0.017 s per clip, 6.23 M parameters)", "",
-        markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", f"clips / s (batch of {8 if quick else 256})", "peak memory"], rows),
-        "", "Parameters: " + ", ".join(f"{k} {v:,}" for k, v in counts.items()) + ".",
-        "" if "cuda" in devices else "No CUDA device here; run the same command on a GPU machine for the GPU rows.",
-    ])
-
-
-def _bench_flaws(data, out, quick, **kwargs):
-    from refiner.bench_flaws import bench_flaws
-
-    return bench_flaws(data, out, quick, **kwargs)
-
-
-def _bench_samples(data, out, quick):
-    from refiner.bench_samples import bench_samples
-
-    return bench_samples(data, out, quick)
+    run.__name__ = run.__qualname__ = name
+    return run
 
 
 SUITES: dict[str, Callable[[Path | None, Path | None, bool], str]] = {
     "concepts": bench_concepts,
-    "refiner": bench_refiner,
-    "speed": bench_speed,
+    "refiner": _moved("bench_refiner"),
+    "speed": _moved("bench_speed"),
     "sanity": bench_sanity,
-    "flaws": _bench_flaws,
-    "samples": _bench_samples,
+    "flaws": _moved("bench_flaws"),
+    "samples": _moved("bench_samples"),
     "generators": bench_generators,
 }
 

@@ -19,6 +19,16 @@ def shared_dir() -> Path:
     return shared_data_dir().parent
 
 
+def bench_json(suite: str, out: Path) -> dict:
+    """Run ``motion-refiner bench SUITE --quick --out OUT`` on the real data; its ``<suite>.json``."""
+    import json
+
+    from refiner.cli import main
+
+    assert main(["bench", suite, "--quick", "--data", str(shared_data_dir()), "--out", str(out)]) == 0
+    return json.loads((Path(out) / f"{suite}.json").read_text())
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)

@@ -2,21 +2,13 @@
 from __future__ import annotations
 
 import json
-import re
+import math
 
 import pytest
+from conftest import bench_json
 
 from refiner.bench import SUITES
 from refiner.cli import main
-
-
-def _row(text: str, first: str) -> list[str]:
-    """Cells of the first Markdown table row whose first cell is ``first``."""
-    for line in text.splitlines():
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if cells and cells[0] == first:
-            return cells
-    raise AssertionError(f"no row {first!r} in:\n{text}")
 
 
 def test_suites_are_registered():
@@ -50,17 +42,58 @@ def test_flaw_records_on_a_few_clips(humanact12):
 
 
 @pytest.mark.real_data
-def test_bench_sanity_quick(capsys):
-    from conftest import shared_data_dir
+@pytest.mark.slow
+def test_bench_flaws_quick(tmp_path):
+    """4 held-out clips, every family: no refiner is skipped, identity is the flaw, ours removes some of it."""
+    from refiner.baselines import FLAW_REFINERS
+    from refiner.bench_flaws import ORACLES
+    from refiner.flaws import FLAW_FAMILIES
 
-    assert main(["bench", "sanity", "--quick", "--data", str(shared_data_dir())]) == 0
-    out = capsys.readouterr().out
-    rows = {name: _row(out, name) for name in ("test vs train", "test vs train, matched",
-                                               "train vs train, matched (floor)")}
-    fid = {k: float(re.match(r"[-\d.]+", v[1]).group()) for k, v in rows.items()}
-    acc = {k: float(re.match(r"[-\d.]+", v[2]).group()) for k, v in rows.items()}
-    assert all(a >= 99.0 for a in acc.values()), acc
-    assert fid["train vs train, matched (floor)"] < fid["test vs train, matched"] < fid["test vs train"] < 2.0
+    rec = bench_json("flaws", tmp_path)
+    assert rec["skipped"] == {}, rec["skipped"]  # a refiner that could not be built fails the test
+    assert rec["clips"] == 4 and rec["severities"] == [2] and rec["families"] == list(FLAW_FAMILIES)
+    names = [*FLAW_REFINERS, *ORACLES]
+    assert list(rec["clean"]) == list(FLAW_REFINERS)
+    by = {(r["family"], r["refiner"]): r for r in rec["flawed"]}
+    assert len(rec["flawed"]) == len(by) == len(FLAW_FAMILIES) * len(names)
+    assert set(by) == {(f, n) for f in FLAW_FAMILIES for n in names}
+    for r in rec["flawed"]:
+        assert math.isfinite(r["removed_pct"]) and r["mpjpe_cm"] >= 0 and r["mpjpe_flawed_cm"] >= 0, r
+    for clean in rec["clean"].values():
+        assert math.isfinite(clean["mpjpe_change_cm"]) and clean["mpjpe_change_cm"] >= 0
+        assert 0.0 <= clean["share_changed"] <= 1.0
+    assert rec["clean"]["identity"] == {"mpjpe_change_cm": 0.0, "share_changed": 0.0}
+    assert rec["clean"]["savgol"]["mpjpe_change_cm"] > 0 and rec["clean"]["savgol"]["share_changed"] == 1.0
+    for family in FLAW_FAMILIES:
+        assert by[(family, "identity")]["removed_pct"] == 0.0 and by[(family, "identity")]["mpjpe_cm"] > 0.2
+    summary = rec["summary"]["2"]
+    assert list(summary) == names
+    for name in names:  # the summary is the mean of the per-family figures
+        values = [by[(f, name)]["removed_pct"] for f in FLAW_FAMILIES]
+        assert summary[name]["mean_removed_pct"] == pytest.approx(sum(values) / len(values))
+    assert summary["identity"]["mean_removed_pct"] == 0.0
+    # the learned refiner leaves clean clips nearly alone and removes more of the flaws than both filters
+    assert rec["clean"]["ours_full"]["mpjpe_change_cm"] < 0.3
+    ours = summary["ours_full"]["mean_removed_pct"]
+    assert ours > 0 and ours > max(summary["savgol"]["mean_removed_pct"], summary["gaussian"]["mean_removed_pct"])
+
+
+@pytest.mark.real_data
+def test_bench_sanity_quick(tmp_path):
+    """Real clips against real clips: FID small and ordered (floor < matched < unmatched), accuracy near 1."""
+    rec = bench_json("sanity", tmp_path)
+    assert rec["test_clips"] + rec["train_clips"] == 1191 and rec["test_clips"] > 0
+    assert rec["n_replications"] == 3 and rec["n_crops"] == 300
+    comps = rec["comparisons"]
+    assert list(comps) == ["test vs train", "test vs train, matched", "train vs train, matched (floor)"]
+    fid = {k: c["metrics"]["fid"] for k, c in comps.items()}
+    for k, c in comps.items():
+        m = c["metrics"]
+        assert all(math.isfinite(v) for v in m["fid"]) and m["fid"][0] > 0 and m["fid"][1] >= 0, k
+        assert 0.99 <= m["accuracy"][0] <= 1.0 and m["diversity"][0] > 0 and c["seconds"] > 0, k
+    assert fid["train vs train, matched (floor)"][0] < fid["test vs train, matched"][0] < fid["test vs train"][0] < 2.0
+    report = (tmp_path / "REPORT.md").read_text()
+    assert f"| test vs train | {fid['test vs train'][0]:.3f} ± {fid['test vs train'][1]:.3f} |" in report
 
 
 @pytest.mark.real_data
