@@ -13,6 +13,7 @@ import numpy as np
 
 from refiner.adapters.base import call_with_options, check_raw, recenter, yup_to_ydown
 from refiner.motion import Motion
+from refiner.skeleton_conversion import HAND_LENGTH, add_hands, convert
 from refiner.validation import to_numpy
 
 __all__ = [
@@ -30,22 +31,9 @@ __all__ = [
 
 N_FEATURES = 263
 N_JOINTS = 22
-#: Wrist-to-hand length added for SMPL joints 22/23 (HumanAct12 mean 0.076 / 0.081 m, §7.1).
-HAND_LENGTH = 0.08
-# Heuristic NTU-VIBE keypoints anchored on skeleton joints (§7.2), metres. "up" is the torso axis
-# (pelvis -> neck), "forward" the body facing from hips and shoulders made orthogonal to it. SMPL's
-# neck -> head bone leans ~45 degrees forward, so it is not used as the head's up axis. Constants
-# chosen so that neck->nose, nose->head-top and ankle->heel land near the NTU-VIBE bone lengths of
-# §1.2 (0.20, 0.19, 0.07 m) on real HumanAct12 poses; not calibrated against SMPL vertices (no SMPL
-# file here).
-NOSE_FORWARD, NOSE_UP = 0.10, 0.05
-HEAD_TOP_UP = 0.20
-HEEL_BACK, HEEL_DOWN = 0.055, 0.04
-
 _FACE = (2, 1, 17, 16)  # r_hip, l_hip, r_shoulder, l_shoulder
 _FEET = ((7, 10), (8, 11))  # left (ankle, foot), right (ankle, foot)
 _FOOT_CONTACT_THRESHOLD = 0.002  # squared displacement per frame, m^2 (HumanML3D's `thres`)
-_SMPL_TO_UESTC = (0, 12, 17, 19, 21, 16, 18, 20, None, 2, 5, 8, 1, 4, 7, None, None, None)
 
 
 def _rot_y(points: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -150,16 +138,6 @@ def joints_to_features(joints) -> np.ndarray:
     return feats
 
 
-def _add_hands(j22: np.ndarray, hand_length: float) -> np.ndarray:
-    """Append SMPL hands 22/23 by extrapolating the forearms (elbow -> wrist) by ``hand_length``."""
-    hands = []
-    for wrist, elbow in ((20, 18), (21, 19)):
-        d = j22[..., wrist, :] - j22[..., elbow, :]
-        d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-9)
-        hands.append(j22[..., wrist, :] + hand_length * d)
-    return np.concatenate([j22, np.stack(hands, axis=-2)], axis=-2)
-
-
 def to_humanact12(joints, *, hand_length: float = HAND_LENGTH) -> np.ndarray:
     """HumanML3D joints ``(..., T, 22, 3)`` (y up) to the 24-joint HumanAct12 frame (generator_formats.md §7.1).
 
@@ -167,44 +145,20 @@ def to_humanact12(joints, *, hand_length: float = HAND_LENGTH) -> np.ndarray:
     the frame-0 pelvis to the origin. Returns float64 ``(..., T, 24, 3)``.
     """
     j = np.asarray(joints, dtype=np.float64)
-    return recenter(yup_to_ydown(_add_hands(j, hand_length)))
+    return recenter(yup_to_ydown(add_hands(j, hand_length)))
 
 
 def to_uestc(joints) -> np.ndarray:
     """HumanML3D joints ``(..., T, 22, 3)`` (y up) to the 18-joint NTU-VIBE / UESTC layout (§7.2).
 
     Fourteen joints correspond directly. Nose, heels and head top are mesh points without a
-    skeleton equivalent and are *estimated* (constants above): nose = head + 0.10 m forward +
+    skeleton equivalent and are *estimated* (:func:`refiner.skeletons.convert`): nose = head + 0.10 m forward +
     0.05 m up; head top = head + 0.20 m up; heel = ankle + 0.055 m backward along the foot
     (ankle - foot, horizontal) - 0.04 m vertically. "Up" is the torso axis pelvis -> neck and
     "forward" the facing from hips and shoulders. Then the same 180-degree x rotation and frame-0
     root subtraction as :func:`to_humanact12`. Returns float64 ``(..., T, 18, 3)``.
     """
-    j = np.asarray(joints, dtype=np.float64)
-    vertical = np.array([0.0, 1.0, 0.0])
-    up = _unit(j[..., 12, :] - j[..., 0, :])
-    r_hip, l_hip, r_sdr, l_sdr = _FACE
-    across = j[..., r_hip, :] - j[..., l_hip, :] + j[..., r_sdr, :] - j[..., l_sdr, :]
-    forward = np.cross(vertical, across)
-    forward = _unit(forward - np.sum(forward * up, axis=-1, keepdims=True) * up)
-    head = j[..., 15, :]
-    extra = {
-        8: head + NOSE_FORWARD * forward + NOSE_UP * up,
-        17: head + HEAD_TOP_UP * up,
-    }
-    for out, (ankle, foot) in ((15, _FEET[0]), (16, _FEET[1])):
-        back = (j[..., ankle, :] - j[..., foot, :]) * np.array([1.0, 0.0, 1.0])
-        norm = np.linalg.norm(back, axis=-1, keepdims=True)
-        back = np.where(norm > 1e-6, back / np.maximum(norm, 1e-9), -forward)
-        extra[out] = j[..., ankle, :] + HEEL_BACK * back - HEEL_DOWN * vertical
-    out = np.stack(
-        [j[..., src, :] if src is not None else extra[k] for k, src in enumerate(_SMPL_TO_UESTC)], axis=-2
-    )
-    return recenter(yup_to_ydown(out))
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+    return recenter(convert(joints, "humanml3d", "uestc"))
 
 
 def _load_stat(value, name: str) -> np.ndarray:

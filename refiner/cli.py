@@ -50,8 +50,11 @@ def _concepts_run(args: argparse.Namespace) -> int:
 
 
 def _train_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dataset", default="humanact12", choices=["humanact12"])
+    p.add_argument("--dataset", default="humanact12", choices=["humanact12", "joints"],
+                   help="joints: your own clips in --data (a folder of .npy + labels.csv, or a .npz; see the README)")
     p.add_argument("--data", type=Path, default=None, help="dataset file or folder (default: ../shared/data/...)")
+    p.add_argument("--skeleton", default=None, help="with --dataset joints: registered skeleton of the clips "
+                                                    "(default: the file's, else the one with their joint count)")
     p.add_argument("--split", default="all", choices=["all", "train"], help="all subjects, or 1-10 for benchmarks")
     p.add_argument("--out", type=Path, required=True, help="folder for the trained refiner (rerun to resume)")
     p.add_argument("--config", default="default", choices=["default", "tiny"])
@@ -73,7 +76,7 @@ def _train_run(args: argparse.Namespace) -> int:
     from refiner.trainer import train_refiner
 
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    dataset = load_dataset(args.dataset, args.data)
+    dataset = load_dataset(args.dataset, args.data, skeleton=args.skeleton)
     if args.learned:
         from refiner.learned_training import train_learned_refiner
 

@@ -52,7 +52,7 @@ class MotionDataset:
     Attributes
     ----------
     name : str
-        ``"humanact12"`` or ``"cmu_mocap"``.
+        ``"humanact12"``, ``"cmu_mocap"`` or ``"joints"`` (user clips, :mod:`refiner.joints_dataset`).
     motions : list of Motion
     names : list of str
         Clip names (empty strings where the source has none).
@@ -201,11 +201,20 @@ def load_cmu_mocap(path: str | os.PathLike | None = None, *, units: str = "m") -
     return MotionDataset("cmu_mocap", motions, names, subjects, CMU_ACTIONS)
 
 
-def load_dataset(name: str, path: str | os.PathLike | None = None) -> MotionDataset:
-    """Load a dataset by name (``"humanact12"`` or ``"cmu_mocap"``)."""
+def load_dataset(name: str, path: str | os.PathLike | None = None, *, skeleton: str | None = None) -> MotionDataset:
+    """Load a dataset by name: ``"humanact12"``, ``"cmu_mocap"`` or ``"joints"`` (your own clips at
+    ``path``, any registered ``skeleton``: :func:`refiner.joints_dataset.load_joints_dataset`)."""
+    if name == "joints":
+        from refiner.joints_dataset import load_joints_dataset
+
+        if path is None:
+            raise ValueError("the 'joints' dataset needs a path (--data): a folder of .npy clips with labels.csv, or a .npz.")
+        return load_joints_dataset(path, skeleton=skeleton)
+    if skeleton is not None:
+        raise ValueError(f"`skeleton` applies to the 'joints' dataset only; {name!r} has its own.")
     loaders = {"humanact12": load_humanact12, "cmu_mocap": load_cmu_mocap}
     if name not in loaders:
-        raise ValueError(f"unknown dataset {name!r}; known: {', '.join(loaders)}.")
+        raise ValueError(f"unknown dataset {name!r}; known: {', '.join(loaders)}, joints.")
     return loaders[name](path)
 
 

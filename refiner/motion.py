@@ -11,7 +11,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from refiner.skeletons import Skeleton, get_skeleton
+from refiner.skeletons import Skeleton, convert, get_skeleton
 from refiner.validation import check_joints
 
 __all__ = ["Motion", "stack_motions", "unstack_motions"]
@@ -95,6 +95,23 @@ class Motion:
     def with_joints(self, joints) -> "Motion":
         """Same skeleton, fps and action with new joints (validated)."""
         return replace(self, joints=joints)
+
+    def to(self, skeleton: str) -> "Motion":
+        """The same clip on another skeleton (:func:`refiner.skeletons.convert`).
+
+        Joints shared by both skeletons are copied, rotated into the target's frame; the others
+        are estimates (:func:`refiner.skeletons.estimated_joints` names them). Fps and action are
+        kept (the action stays an index in the clip's original label set). The same skeleton
+        returns an equal copy.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> Motion(np.zeros((60, 24, 3)), skeleton="humanact12").to("uestc").n_joints
+        18
+        """
+        return Motion(convert(self.joints, self.skeleton, skeleton), skeleton=get_skeleton(skeleton).name,
+                      fps=self.fps, action=self.action)
 
     def normalized(self) -> "Motion":
         """Translate so that the root of the first frame is at the origin (appendix A)."""

@@ -8,6 +8,7 @@ anything is called.
 from __future__ import annotations
 
 import pickle
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -52,8 +53,8 @@ def load_pickle(path, *, what: str, sparse: bool = False, chumpy: bool = False):
 
     Parameters
     ----------
-    path : path-like
-        The ``.pkl`` file.
+    path : path-like or binary file object
+        The ``.pkl`` file, or an open stream positioned at a pickle (e.g. inside an ``.npy`` member).
     what : str
         What the file should be, for the error messages (e.g. ``"an SMPL model file"``).
     sparse : bool, default=False
@@ -72,9 +73,10 @@ def load_pickle(path, *, what: str, sparse: bool = False, chumpy: bool = False):
     ValueError
         The file names anything else (nothing it names is called), is truncated or is not a pickle.
     """
-    path = Path(path)
+    stream = path if hasattr(path, "read") else None
+    path = Path(getattr(path, "name", "<stream>")) if stream is not None else Path(path)
     try:
-        with open(path, "rb") as f:
+        with open(path, "rb") if stream is None else nullcontext(stream) as f:
             data = _RestrictedUnpickler(f, sparse=sparse, chumpy=chumpy, encoding="latin1").load()
     except _Refused as e:
         raise ValueError(f"{str(path)!r} is not {what}: it names {e}, and only arrays are loaded from it.") from e

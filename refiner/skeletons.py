@@ -18,6 +18,8 @@ __all__ = [
     "register_skeleton",
     "bone_lengths",
     "rigid_skeleton",
+    "convert",
+    "estimated_joints",
 ]
 
 
@@ -274,3 +276,7 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
         np.add.at(move, (slice(None), bones[:, 1]), -corr)
         x += 1.5 * move / count  # over-relaxed: converges in far fewer sweeps
     return x.astype(joints.dtype), variation
+
+
+# the conversions need the registry above; imported last so that both names live here too
+from refiner.skeleton_conversion import convert, estimated_joints  # noqa: E402

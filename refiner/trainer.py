@@ -42,6 +42,9 @@ LICENCE = ("Trained on HumanAct12 (derived from PHSPD): academic, non-commercial
            "Cite Action2Motion (Guo et al. 2020) and PHSPD (Zou et al. 2020).")
 
 
+USER_DATA_LICENCE = "Trained on user-supplied joint clips: the licence of those data applies to these weights."
+
+
 def train_refiner(
     dataset: MotionDataset,
     out: str | Path,
@@ -98,7 +101,8 @@ def train_refiner(
     anchor_concepts = part("anchor_concepts", AnchorConcepts, lambda: concepts.anchor_concepts)
     subjects = data.subjects if data.subjects.any() else None
     anchor_quality = part("anchor_quality", AnchorQuality, lambda: fit_anchor_quality(
-        clips, anchors, actions, n_actions=len(dataset.action_names), random_state=random_state, subjects=subjects))
+        clips, anchors, actions, n_actions=len(dataset.action_names), random_state=random_state, subjects=subjects,
+        skeleton=data.motions[0].skeleton))
     recognizer = part("recognizer", AnchorRecognizer, lambda: AnchorRecognizer(**cfg["encoder"], **common).fit(
         clips, anchors, actions, n_actions=len(dataset.action_names)))
     anchor_refiner = part("anchor_refiner", AnchorRefiner, lambda: AnchorRefiner(**cfg["encoder"], **common).fit(
@@ -112,7 +116,7 @@ def train_refiner(
     manifest = {
         "dataset": dataset.name, "split": split, "config": config, "clips": len(clips),
         "subjects": sorted(set(int(s) for s in data.subjects)), "penalty": concepts.config["penalty"],
-        "licence": LICENCE, "commit": _commit(), "train_seconds": seconds,
+        "licence": LICENCE if dataset.name == "humanact12" else USER_DATA_LICENCE, "commit": _commit(), "train_seconds": seconds,
         "total_seconds": round(time.perf_counter() - t0, 1),
     }
     refiner = Refiner(recognizer, anchor_refiner, generator, transition_refiner, anchor_concepts, anchor_quality,
@@ -142,7 +146,7 @@ def held_out_clips(actions, random_state=0, subjects=None) -> np.ndarray:
 
 
 def fit_anchor_quality(clips, anchors, actions, *, n_actions: int, random_state=0, n_components: int = 2,
-                       subjects=None) -> AnchorQuality:
+                       subjects=None, skeleton: str = "humanact12") -> AnchorQuality:
     """Per-action pose GMM on the clips' anchors but those of :func:`held_out_clips`, which set the
     flaw threshold (and also calibrate the refiner)."""
     held = held_out_clips(actions, random_state, subjects)
@@ -153,7 +157,7 @@ def fit_anchor_quality(clips, anchors, actions, *, n_actions: int, random_state=
         acts = np.concatenate([np.full(len(anchors[i]), actions[i]) for i in sel])
         return poses, acts
 
-    return AnchorQuality(n_components, random_state=random_state).fit(*gather(~held), validation=gather(held),
+    return AnchorQuality(n_components, skeleton=skeleton, random_state=random_state).fit(*gather(~held), validation=gather(held),
                                                                      n_actions=n_actions)
 
 
