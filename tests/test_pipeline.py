@@ -1,4 +1,5 @@
 """The three-step refiner: a tiny pipeline trained on real clips, splicing, do-no-harm, input kinds, errors."""
+import os
 import numpy as np
 import pytest
 import torch
@@ -178,3 +179,20 @@ def test_inputs_that_cannot_be_metres_are_refused(humanact12, change, match):
         refine(change(clip))
     with pytest.raises(ValueError, match="unknown mode ''"):
         refine(clip, mode="")  # an empty mode is a mistake, not "full"
+
+
+def test_threads_auto_one_for_small_batches_more_for_large_and_restored():
+    import torch
+
+    from refiner.pipeline import AUTO_THREADS_BATCH, Refiner, _auto_threads
+
+    assert _auto_threads(np.zeros((60, 24, 3))) == 1
+    assert _auto_threads(np.zeros((AUTO_THREADS_BATCH - 1, 60, 24, 3))) == 1
+    big = _auto_threads(np.zeros((AUTO_THREADS_BATCH, 60, 24, 3)))
+    assert 1 <= big <= 4 and (big > 1 or len(os.sched_getaffinity(0)) == 1)
+    for bad in (0, -1, 1.5, True, "all"):
+        with pytest.raises(ValueError, match="threads"):
+            Refiner.pretrained("humanact12", split="train", threads=bad)
+    before = torch.get_num_threads()
+    Refiner.pretrained("humanact12", split="train").refine(np.zeros((40, 30, 24, 3), np.float32) + 0.1 * np.arange(24)[:, None])
+    assert torch.get_num_threads() == before
