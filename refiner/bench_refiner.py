@@ -99,7 +99,7 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
         t0 = time.perf_counter()
         model.refine(x)
         times.append(time.perf_counter() - t0)
-    rec["latency"] = {"clips": len(times), "threads": model.threads or torch.get_num_threads(),
+    rec["latency"] = {"clips": len(times), "threads": model.threads_for(window[0]) or torch.get_num_threads(),
                       "median_ms": float(1000 * np.median(times)), "p90_ms": float(1000 * np.percentile(times, 90))}
     lat = rec["latency"]
     lines += ["", f"(d) refine latency per 60-frame clip, CPU batch 1 ({lat['threads']} threads, "
@@ -165,7 +165,9 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool) -> str:
             runs.append(time.perf_counter() - t0)
         rec["devices"].append({
             "device": device,
-            "name": f"{torch.get_num_threads()} threads" if device == "cpu" else torch.cuda.get_device_name(),
+            "name": (f"{model.threads_for(clips[0]) or torch.get_num_threads()} / "
+                     f"{model.threads_for(batch) or torch.get_num_threads()} threads (batch 1 / {batch_size})")
+            if device == "cpu" else torch.cuda.get_device_name(),
             "median_ms": float(1000 * np.median(times)), "p90_ms": float(1000 * np.percentile(times, 90)),
             "clips_per_s": len(batch) / float(np.median(runs)),
             "peak_mib": float(torch.cuda.max_memory_allocated() / 2**20 if device == "cuda"

@@ -351,6 +351,10 @@ class Refiner:
 
     # ------------------------------------------------------------------ refinement
 
+    def threads_for(self, seq) -> int | None:
+        """The torch / BLAS threads :meth:`refine` uses for ``seq`` (None: torch's setting, untouched)."""
+        return _auto_threads(seq) if self.threads == "auto" else self.threads
+
     def refine(self, seq, *, action=None, mode: str | None = None, return_report: bool = False):
         """Refine one clip or a batch; returns the same kind as given (see :func:`refine`)."""
         if self.threads is None:
@@ -358,7 +362,7 @@ class Refiner:
         import torch
         from threadpoolctl import threadpool_limits
 
-        threads = self.threads if self.threads != "auto" else _auto_threads(seq)
+        threads = self.threads_for(seq)
         before = torch.get_num_threads()
         torch.set_num_threads(threads)
         try:

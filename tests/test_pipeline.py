@@ -193,6 +193,9 @@ def test_threads_auto_one_for_small_batches_more_for_large_and_restored():
     for bad in (0, -1, 1.5, True, "all"):
         with pytest.raises(ValueError, match="threads"):
             Refiner.pretrained("humanact12", split="train", threads=bad)
+    model = Refiner.pretrained("humanact12", split="train")
+    assert model.threads_for(np.zeros((60, 24, 3))) == 1 and model.threads_for(np.zeros((64, 60, 24, 3))) == big
+    assert Refiner.pretrained("humanact12", split="train", threads=3).threads_for(np.zeros((60, 24, 3))) == 3
     before = torch.get_num_threads()
     Refiner.pretrained("humanact12", split="train").refine(np.zeros((40, 30, 24, 3), np.float32) + 0.1 * np.arange(24)[:, None])
     assert torch.get_num_threads() == before
