@@ -41,7 +41,8 @@ REPAIRS = ("typed", "select", "given", "infill")
 _GROUP_NAMES = tuple(GROUPS)
 #: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many
 #: frames its window is widened on each side; ``"a+b"`` applies ``a``, then ``b`` to its result.
-#: Chosen by measurement on the calibration subjects 9-10 of the train split (every 2nd clip, the
+#: Chosen by measurement (``examples/measure_typed_repairs.py``, which takes each variant below as
+#: JSON) on the calibration subjects 9-10 of the train split (every 2nd clip, the
 #: benchmark's five training families at severity 2 and clean clips; the two held-out families were
 #: printed but not used to choose), share of the flaws' MPJPE removed, mean of the 7 families:
 #:
