@@ -331,10 +331,19 @@ class Refiner:
         """The shipped weights: ``split="all"`` (default, all subjects) or ``"train"`` (subjects 1-10, for benchmarks).
 
         Weights are loaded on first use and verified against their manifest. They were trained on
-        HumanAct12, which is for academic, non-commercial use only; so are they.
+        HumanAct12, which is for academic, non-commercial use only; so are they. A skeleton without
+        weights of its own that :func:`refiner.skeletons.convert` connects with HumanAct12's
+        (``uestc``, ``humanml3d``, ``cmu_mocap``) gets a
+        :class:`~refiner.converted_refinement.ConvertedRefiner` running the HumanAct12 weights.
         """
         name = f"{get_skeleton(skeleton).name}" + ("" if split == "all" else f"-{split}")
         folder = _WEIGHTS / name
+        if not (folder / "manifest.json").is_file() and _converts(skeleton):
+            from refiner.converted_refinement import ConvertedRefiner
+
+            tolerance = kwargs.pop("rigid_tolerance", 0.005)  # on the clip's own bones, not the estimated ones
+            base = cls.pretrained("humanact12", split=split, device=device, rigid_tolerance=float("inf"), **kwargs)
+            return ConvertedRefiner(base, skeleton, rigid_tolerance=tolerance)
         if not (folder / "manifest.json").is_file():
             known = sorted(p.name for p in _WEIGHTS.iterdir() if (p / "manifest.json").is_file()) if _WEIGHTS.is_dir() else []
             raise ValueError(f"no shipped weights for skeleton {skeleton!r}, split {split!r}; shipped: {known or 'none'}.")
@@ -652,6 +661,17 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
     """
     model = refiner if refiner is not None else Refiner.pretrained(skeleton)
     return model.refine(seq, action=action, mode=mode, return_report=return_report)
+
+
+def _converts(skeleton: str) -> bool:
+    """Whether :func:`refiner.skeletons.convert` connects ``skeleton`` with HumanAct12 both ways."""
+    from refiner.skeleton_conversion import estimated_joints
+
+    try:
+        estimated_joints(skeleton, "humanact12"), estimated_joints("humanact12", skeleton)
+    except ValueError:
+        return False
+    return get_skeleton(skeleton).name != "humanact12"
 
 
 def _spline_residual(frames: np.ndarray) -> float:

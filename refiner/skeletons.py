@@ -250,9 +250,12 @@ register_skeleton(Skeleton(
 ))
 
 
-def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, iterations: int = 60) -> tuple[np.ndarray, float]:
+def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, iterations: int = 60,
+                   bones: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Joints ``(T, J, 3)`` put on their median bone lengths when any bone's length varies (std / mean)
     by more than ``tolerance``; returns ``(joints, worst variation)`` (joints unchanged below it).
+    ``bones``: boolean mask ``(J - 1,)`` of the bones to judge and enforce (default all; a layout
+    whose "bones" span a bending chain, such as UESTC's neck -> shoulder, leaves those out).
 
     The lengths are enforced by moving both ends of every bone toward its length (Jacobi
     iterations of a constraint projection), which spreads each correction over the joints next to
@@ -260,13 +263,19 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
     all descendants (it raised the error of drifting joints from 3.8 to 5.3 cm).
     """
     lengths = bone_lengths(joints, skeleton)
+    use = np.ones(lengths.shape[-1], bool) if bones is None else np.asarray(bones, bool)
+    if use.shape != (lengths.shape[-1],):
+        raise ValueError(f"`bones` must be a boolean mask of the {lengths.shape[-1]} bones; got shape {use.shape}.")
+    if not use.any():
+        return joints, 0.0
+    lengths = lengths[..., use]
     variation = float((lengths.std(0) / np.maximum(lengths.mean(0), 1e-9)).max())
     if variation <= tolerance:
         return joints, variation
-    bones = get_skeleton(skeleton).bones
-    target = np.median(lengths, axis=0)  # (J-1,)
+    bones = get_skeleton(skeleton).bones[use]
+    target = np.median(lengths, axis=0)  # (n_bones,)
     x = joints.astype(np.float64).copy()
-    count = np.bincount(bones.ravel(), minlength=x.shape[1]).astype(np.float64)[None, :, None]
+    count = np.maximum(np.bincount(bones.ravel(), minlength=x.shape[1]), 1).astype(np.float64)[None, :, None]
     for _ in range(iterations):
         d = x[:, bones[:, 1]] - x[:, bones[:, 0]]  # (T, B, 3)
         norm = np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-9)

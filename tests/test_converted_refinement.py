@@ -1,0 +1,86 @@
+"""Skeletons without weights of their own are refined through the HumanAct12 weights (refiner.converted_refinement)."""
+import numpy as np
+import pytest
+import torch
+
+import refiner
+from refiner import Motion
+from refiner.converted_refinement import FLEXIBLE_BONES, ConvertedRefiner
+from refiner.flaws import frozen_transition
+from refiner.pipeline import Refiner
+from refiner.skeletons import Skeleton, bone_lengths, convert, get_skeleton, joint_bone_lengths, with_bone_lengths
+
+
+@pytest.fixture(scope="module")
+def held_out(humanact12):
+    return [m for m in humanact12.split("test").motions if m.n_frames >= 40][:40:5]  # 8 clips of subjects 11-12
+
+
+@pytest.mark.real_data
+@pytest.mark.parametrize("skeleton", ["uestc", "cmu_mocap", "humanml3d"])
+def test_clean_clips_come_back_exactly_and_say_how(held_out, skeleton):
+    model = Refiner.pretrained(skeleton, split="train")
+    assert isinstance(model, ConvertedRefiner) and model.skeleton == skeleton
+    for m in held_out:
+        x = convert(m.joints, "humanact12", skeleton).astype(np.float32)
+        before = x.copy()
+        out, report = model.refine(x, return_report=True)
+        np.testing.assert_array_equal(x, before)  # input untouched
+        np.testing.assert_array_equal(out, x)
+        assert report.changes == [] and "through refiner.skeletons.convert" in report.notes[-1]
+
+
+@pytest.mark.real_data
+def test_a_stalled_uestc_clip_is_repaired_and_kinds_are_kept(held_out):
+    fixed, flawed_err, clips = [], [], []
+    for i, m in enumerate(held_out):
+        c = frozen_transition(m, 2, random_state=i)
+        clean = convert(m.joints, "humanact12", "uestc")
+        x = convert(c.motion.joints, "humanact12", "uestc").astype(np.float32)
+        out, report = refiner.refine(x, skeleton="uestc", return_report=True)
+        reported = np.zeros(len(x), bool)
+        for change in report.changes:
+            reported[change["start"] : change["stop"]] = True
+        assert (out == x).all((-1, -2))[~reported].all()  # frames outside the reported changes exactly as given
+        flawed_err.append(np.linalg.norm(x - clean, axis=-1).mean())
+        fixed.append(np.linalg.norm(out - clean, axis=-1).mean())
+        clips.append(x[:40])
+    assert np.mean(fixed) < 0.9 * np.mean(flawed_err)
+    batch = np.stack(clips)
+    out_batch = refiner.refine(batch, skeleton="uestc")
+    for b, clip in enumerate(clips):
+        np.testing.assert_array_equal(out_batch[b], refiner.refine(clip, skeleton="uestc"))
+    t = refiner.refine(torch.from_numpy(batch), skeleton="uestc")
+    assert isinstance(t, torch.Tensor) and t.shape == batch.shape
+    motion = Motion(clips[0], skeleton="uestc")
+    back = refiner.refine(motion, skeleton="uestc")
+    assert isinstance(back, Motion) and back.skeleton == "uestc"
+
+
+@pytest.mark.real_data
+def test_stretching_uestc_bones_come_back_rigid_but_bending_chains_stay_free(held_out):
+    m = held_out[0]
+    x = convert(m.joints, "humanact12", "uestc")
+    skel = get_skeleton("uestc")
+    lengths = joint_bone_lengths(x, skel)
+    wave = 1 + 0.08 * np.sin(np.linspace(0, 6, len(x)))[:, None]
+    elbow = skel.joint_names.index("left_wrist")
+    lengths[:, elbow] *= wave[:, 0]  # the left forearm stretches by up to 8 %
+    stretched = with_bone_lengths(x, lengths, skel).astype(np.float32)
+    out, report = refiner.refine(stretched, skeleton="uestc", return_report=True)
+    assert report.changes[0]["step"] == "skeleton"
+    model = Refiner.pretrained("uestc")
+    got = bone_lengths(out, skel)
+    cv = got.std(0) / got.mean(0)
+    assert cv[model.rigid_bones].max() < 0.005
+    names = [frozenset((skel.joint_names[a], skel.joint_names[b])) for a, b in skel.bones]
+    flexible = [names.index(frozenset(p)) for p in FLEXIBLE_BONES["uestc"]]
+    assert not model.rigid_bones[flexible].any() and model.rigid_bones.sum() == len(names) - len(flexible)
+
+
+def test_skeletons_the_conversion_cannot_reach_still_have_no_weights():
+    from refiner.skeletons import register_skeleton
+
+    register_skeleton(Skeleton("toy3", ("root", "a", "b"), (-1, 0, 1), up="-y", forward="-z"), overwrite=True)
+    with pytest.raises(ValueError, match="no shipped weights"):
+        Refiner.pretrained("toy3")
