@@ -81,6 +81,7 @@ def test_stretching_uestc_bones_come_back_rigid_but_bending_chains_stay_free(hel
 def test_skeletons_the_conversion_cannot_reach_still_have_no_weights():
     from refiner.skeletons import register_skeleton
 
-    register_skeleton(Skeleton("toy3", ("root", "a", "b"), (-1, 0, 1), up="-y", forward="-z"), overwrite=True)
+    register_skeleton(Skeleton("toy_unconvertible", ("root", "a", "b"), (-1, 0, 1), up="-y", forward="-z"),
+                      overwrite=True)
     with pytest.raises(ValueError, match="no shipped weights"):
-        Refiner.pretrained("toy3")
+        Refiner.pretrained("toy_unconvertible")

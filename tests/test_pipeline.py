@@ -164,7 +164,8 @@ def test_shipped_weights_refine_a_60_frame_clip(humanact12):
     assert bench.manifest["subjects"] == list(range(1, 11))
     assert set(bench.manifest["calibration"]) >= {"anchor_threshold", "transition_thresholds"}
     with pytest.raises(ValueError, match="no shipped weights"):
-        Refiner.pretrained("uestc")
+        Refiner.pretrained("humanact12", split="test")
+    assert type(Refiner.pretrained("uestc")).__name__ == "ConvertedRefiner"  # through the HumanAct12 weights
 
 
 @pytest.mark.real_data
