@@ -3,8 +3,9 @@
 Every suite is a function ``(data_dir, out_dir, quick) -> str`` returning a Markdown section that
 is printed as it is produced and, with ``--out``, collected into ``REPORT.md``; with ``--out`` each
 suite also writes its figures as ``<suite>.json`` (:func:`write_record`), the numbers of its tables.
-``refiner``/``speed``, ``flaws`` and ``samples`` live in :mod:`refiner.bench_refiner`,
-:mod:`refiner.bench_flaws` and :mod:`refiner.bench_samples`, imported on first use.
+``refiner``/``speed``, ``flaws``, ``samples`` and ``skeletons`` live in :mod:`refiner.bench_refiner`,
+:mod:`refiner.bench_flaws`, :mod:`refiner.bench_samples` and :mod:`refiner.bench_skeletons`,
+imported on first use.
 """
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ __all__ = ["SUITES", "run_benchmarks", "markdown_table", "write_record", "one_th
 
 #: suites kept in their own modules (they import this one): function name -> module
 _ELSEWHERE = {"bench_refiner": "refiner.bench_refiner", "bench_speed": "refiner.bench_refiner",
-              "bench_flaws": "refiner.bench_flaws", "bench_samples": "refiner.bench_samples"}
+              "bench_flaws": "refiner.bench_flaws", "bench_samples": "refiner.bench_samples",
+              "bench_skeletons": "refiner.bench_skeletons"}
 
 
 def __getattr__(name: str):
@@ -259,6 +261,7 @@ SUITES: dict[str, Callable[[Path | None, Path | None, bool], str]] = {
     "sanity": bench_sanity,
     "flaws": _moved("bench_flaws"),
     "samples": _moved("bench_samples"),
+    "skeletons": _moved("bench_skeletons"),
     "generators": bench_generators,
 }
 
@@ -268,7 +271,8 @@ def run_benchmarks(suite: str, *, data: Path | None = None, out: Path | None = N
     names = list(SUITES) if suite == "all" else [suite]
     sections = []
     for name in names:
-        extra = {"stride": stride, "severities": severities} if name == "flaws" else {}
+        extra = ({"stride": stride, "severities": severities} if name == "flaws"
+                 else {"stride": stride} if name == "skeletons" and stride > 1 else {})
         section = SUITES[name](data, out, quick, **extra)
         print(section, flush=True)
         print(flush=True)

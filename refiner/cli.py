@@ -108,7 +108,7 @@ def _bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", type=Path, default=None, help="folder holding humanact12/ (default: ../shared/data)")
     p.add_argument("--out", type=Path, default=None, help="folder for REPORT.md, plots and <suite>.json (the figures as records)")
     p.add_argument("--quick", action="store_true", help="tiny configuration (for tests)")
-    p.add_argument("--stride", type=int, default=1, help="flaws: keep every N-th held-out clip")
+    p.add_argument("--stride", type=int, default=1, help="flaws, skeletons: keep every N-th held-out clip (skeletons default 4)")
     p.add_argument("--severity", type=int, action="append", choices=[1, 2, 3], help="flaws: only these severities")
 
 

@@ -112,3 +112,18 @@ def test_bench_samples_quick(tmp_path):
     assert ntu["clips"] == 5 and 0.0 <= ntu["refined"]["accuracy"] <= 1.0
     assert ntu["refined"]["bone_length_variation"] < 0.5 * ntu["generated"]["bone_length_variation"]
     assert all("uestc bone lengths" in r["changes"][0]["reason"] for r in ntu["reports"])
+
+
+@pytest.mark.real_data
+def test_bench_skeletons_quick(tmp_path):
+    """One row per skeleton: clean clips untouched, seeded flaws partly removed, natively and through conversion."""
+    from conftest import bench_json
+
+    rec = bench_json("skeletons", tmp_path)
+    rows = rec["skeletons"]
+    assert list(rows) == ["humanact12", "uestc"] and rec["clips"] == 4
+    for row in rows.values():
+        assert row["clips"] == 4 and row["clean_mpjpe_change_cm"] < 0.3 and 0.0 <= row["clean_clips_changed"] <= 1.0
+        assert set(row["removed_pct"]) == {"frozen_transition", "foot_sliding"}
+        assert row["mean_removed_pct"] == pytest.approx(sum(row["removed_pct"].values()) / 2)
+        assert row["removed_pct"]["foot_sliding"] > 20.0  # the planted feet come back to the ground
