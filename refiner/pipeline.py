@@ -632,6 +632,8 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
     seq : Motion, or array-like of shape (T, J, 3) or (B, T, J, 3) (numpy or torch)
         Joint positions in metres in the skeleton's canonical frame (HumanAct12: y down, facing -z).
     skeleton : str, default="humanact12"
+        ``"humanact12"`` has shipped weights; ``"uestc"``, ``"cmu_mocap"`` and ``"humanml3d"`` are
+        refined through them (:class:`~refiner.converted_refinement.ConvertedRefiner`).
     action : int, str or None
         Action index or name (per clip for a batch); inferred by anchor recognition when None.
     mode : {"full", "anchor", "transition"}, default="full"
