@@ -85,3 +85,23 @@ def test_skeletons_the_conversion_cannot_reach_still_have_no_weights():
                       overwrite=True)
     with pytest.raises(ValueError, match="no shipped weights"):
         Refiner.pretrained("toy_unconvertible")
+
+
+@pytest.mark.real_data
+def test_refined_generator_on_uestc_with_real_ntu13_samples():
+    from conftest import shared_data_dir
+
+    samples = np.load(shared_data_dir().parent / "samples" / "action2motion" / "ntu13_xyz_vae_samples.npy")
+
+    class Ntu13Samples:
+        def sample(self, action, n=1, random_state=None):
+            return samples[:n].copy()
+
+    gen = refiner.RefinedGenerator(Ntu13Samples(), adapter="action2motion", skeleton="uestc",
+                                   adapter_options={"representation": "xyz", "skeleton": "uestc"})
+    motions = gen.sample(None, n=3)
+    assert [m.skeleton for m in motions] == ["uestc"] * 3 and motions[0].joints.shape == (60, 18, 3)
+    from refiner.physics import bone_length_variation
+
+    raw = refiner.plugins.manager.convert("action2motion", samples[:3], representation="xyz", skeleton="uestc")
+    assert np.mean([bone_length_variation(m) for m in motions]) < 0.5 * np.mean([bone_length_variation(m) for m in raw])
