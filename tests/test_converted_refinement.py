@@ -102,6 +102,7 @@ def test_refined_generator_on_uestc_with_real_ntu13_samples():
     motions = gen.sample(None, n=3)
     assert [m.skeleton for m in motions] == ["uestc"] * 3 and motions[0].joints.shape == (60, 18, 3)
     from refiner.physics import bone_length_variation
+    from refiner.plugins.manager import convert as adapter_convert
 
-    raw = refiner.plugins.manager.convert("action2motion", samples[:3], representation="xyz", skeleton="uestc")
+    raw = adapter_convert("action2motion", samples[:3], representation="xyz", skeleton="uestc")
     assert np.mean([bone_length_variation(m) for m in motions]) < 0.5 * np.mean([bone_length_variation(m) for m in raw])
