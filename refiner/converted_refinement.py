@@ -6,8 +6,9 @@ A clip on skeleton S (e.g. the 18-joint ``uestc`` layout) is converted to the re
 refiner changed, so the frames it left alone are returned exactly as given, and the joints that the
 conversion has to estimate (on ``uestc``: the nose, heels and head top from SMPL joints; on the way
 in, spine, collars, feet, hands and head from the 18) affect the result only through the change.
-The action is unknown unless given (``uestc``'s 40 labels are not HumanAct12's 12): the recognition
-network's "unknown" entry handles it, and the flaw classifier is action-agnostic.
+The action is unknown unless given as one of HumanAct12's action names (``uestc``'s 40 labels are not
+HumanAct12's 12): the recognition network's "unknown" entry handles it, and the flaw classifier is
+action-agnostic.
 """
 from __future__ import annotations
 
@@ -54,6 +55,8 @@ class ConvertedRefiner:
 
     def __init__(self, base, skeleton: str, *, rigid_tolerance: float = 0.005):
         self.base = base
+        if isinstance(rigid_tolerance, bool) or not isinstance(rigid_tolerance, (int, float)) or rigid_tolerance < 0:
+            raise ValueError(f"`rigid_tolerance` must be a number >= 0; got {rigid_tolerance!r}.")
         self.rigid_tolerance = float(rigid_tolerance)
         self.skeleton = get_skeleton(skeleton).name
         self.action_names = base.action_names
@@ -67,33 +70,75 @@ class ConvertedRefiner:
     def __repr__(self) -> str:
         return f"ConvertedRefiner({self.skeleton!r} through {self.base.skeleton!r})"
 
+    @property
+    def threads(self):
+        """``base``'s thread setting, which :meth:`refine` runs under (see :class:`~refiner.pipeline.Refiner`)."""
+        return self.base.threads
+
+    def threads_for(self, seq) -> int | None:
+        """The torch / BLAS threads :meth:`refine` uses for ``seq``."""
+        return self.base.threads_for(seq)
+
     def refine(self, seq, *, action=None, mode: str | None = None, return_report: bool = False):
-        """Refine one clip or a batch of ``skeleton``; returns the same kind as given (see :func:`refiner.refine`)."""
+        """Refine one clip or a batch of ``skeleton``; returns the same kind as given (see :func:`refiner.refine`).
+
+        ``action``: a name among ``base``'s actions (HumanAct12's) is used; any other action (an index
+        or name of this skeleton's own dataset, e.g. UESTC's 40 labels or NTU13's 13) or None refines
+        action-agnostic, and the report says so. A :class:`~refiner.motion.Motion`'s own action is
+        such a label too.
+        """
+        from refiner.pipeline import thread_limits
+
+        with thread_limits(self.threads_for(seq)):
+            return self._refine(seq, action, mode, return_report)
+
+    def _refine(self, seq, action, mode, return_report):
+        from refiner.pipeline import MIN_FRAMES, _check_metres
+
         if isinstance(seq, Motion):
             if seq.skeleton != self.skeleton:
                 raise ValueError(f"this refiner is for skeleton {self.skeleton!r}; got a {seq.skeleton!r} motion.")
-            out, report = self.refine(seq.joints, action=seq.action if action is None else action, mode=mode,
-                                      return_report=True)
+            out, report = self._refine(seq.joints, seq.action if action is None else action, mode, True)
             result = seq.with_joints(out)
             return (result, report) if return_report else result
         batched = len(getattr(seq, "shape", np.shape(seq))) == 4
         x = check_joints(seq, skeleton=self.skeleton, batched=batched)
         clips = x if batched else x[None]
-        rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) for c in clips]
+        skel = get_skeleton(self.skeleton)
+        for i, clip in enumerate(clips):
+            try:
+                _check_metres(clip, skel)
+            except ValueError as e:
+                if not batched:
+                    raise
+                raise ValueError(f"clip {i} of {len(clips)}: {e}") from e
+        actions = list(action) if batched and isinstance(action, (list, tuple, np.ndarray)) else [action] * len(clips)
+        if len(actions) != len(clips):
+            raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
+        known = [a if isinstance(a, str) and a in self.action_names else None for a in actions]
+        long_enough = clips.shape[1] >= MIN_FRAMES  # shorter clips come back exactly as given
+        rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
+                 else (c, 0.0) for c in clips]
         given = np.stack([r[0] for r in rigid]).astype(np.float32)
         # the joints the conversion estimates do not keep their lengths, and the flaw classifier reads
         # bone-length changes as flaws (it flagged every frame of converted clean clips): make them rigid
         inner = np.stack([rigid_skeleton(c, self.base.skeleton, self.rigid_tolerance)[0]
                           for c in convert(given, self.skeleton, self.base.skeleton)]).astype(np.float32)
-        refined, reports = self.base.refine(inner, action=action, mode=mode, return_report=True)
+        if batched:
+            refined, reports = self.base.refine(inner, action=known, mode=mode, return_report=True)
+        else:
+            one, report = self.base.refine(inner[0], action=known[0], mode=mode, return_report=True)
+            refined, reports = one[None], [report]
         changed = ~(refined == inner).reshape(*refined.shape[:2], -1).all(-1)  # (B, T)
         delta = convert(refined, self.base.skeleton, self.skeleton) - convert(inner, self.base.skeleton, self.skeleton)
         out = given.copy()
         out[changed] = (given[changed] + delta[changed]).astype(np.float32)
         note = (f"refined as {self.base.skeleton!r} through refiner.skeletons.convert; only the change came back"
                 + (f" (estimated on the way back: {', '.join(self.estimated)})" if self.estimated else ""))
-        for report, (_, variation) in zip(reports, rigid):
+        for report, (_, variation), asked, used in zip(reports, rigid, actions, known):
             report.notes.append(note)
+            if asked is not None and used is None:
+                report.notes.append(f"action {asked!r} is not one of the refiner's actions; refined action-agnostic")
             if variation > self.rigid_tolerance:
                 report.changes.insert(0, {"start": 0, "stop": x.shape[-3], "step": "skeleton", "reason":
                                           f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "

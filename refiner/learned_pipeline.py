@@ -40,7 +40,8 @@ __all__ = ["flag_runs", "refine_batch", "check_detect", "REPAIRS", "DETECTORS"]
 REPAIRS = ("typed", "select", "given", "infill")
 _GROUP_NAMES = tuple(GROUPS)
 #: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many
-#: frames its window is widened on each side; ``"a+b"`` applies ``a``, then ``b`` to its result.
+#: frames its window is widened on each side; ``"a+b"`` applies ``a``, then ``b`` to its result (a
+#: network proposal, which is computed for the whole batch beforehand, can only come first).
 #: Chosen by measurement (``examples/measure_typed_repairs.py``, which takes each variant below as
 #: JSON) on the calibration subjects 9-10 of the train split (every 2nd clip, the
 #: benchmark's five training families at severity 2 and clean clips; the two held-out families were
@@ -166,7 +167,9 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
         name, widen = TYPED_REPAIRS[group]
         a, c = max(lo - widen, 0), min(hi + widen, len(y))
         proposal = y
-        for part in name.split("+"):  # applied left to right
+        for k, part in enumerate(name.split("+")):  # applied left to right
+            if part in proposals and k > 0:
+                raise ValueError(f"typed repair {name!r}: a network proposal ({part!r}) can only come first.")
             proposal = proposals[part] if part in proposals else CANDIDATES[part](proposal, a, c, skel)
         note = f"; looks like a {group} flaw (group probability {share.max():.2f})"
         name = name + (f" (widened by {widen})" if widen else "")

@@ -27,7 +27,9 @@ put back on the input's bone lengths.
 """
 from __future__ import annotations
 
+import numbers
 import os
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -182,9 +184,29 @@ def project_bone_lengths(joints: np.ndarray, lengths: np.ndarray, frames: np.nda
 AUTO_THREADS_BATCH = 32
 
 
+@contextmanager
+def thread_limits(threads: int | None):
+    """torch intra-op and BLAS threads set to ``threads`` inside the block, restored after (None: untouched)."""
+    if threads is None:
+        yield
+        return
+    import torch
+    from threadpoolctl import threadpool_limits
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        with threadpool_limits(threads):  # under load, free BLAS threads made a call 3-12x slower
+            yield
+    finally:
+        torch.set_num_threads(before)
+
+
 def _auto_threads(seq) -> int:
     """One thread for a clip or a small batch, the available cores (at most 4) for a large one."""
     shape = getattr(seq, "shape", None)
+    if shape is None and isinstance(seq, (list, tuple)):
+        shape = np.shape(seq)
     if shape is None or len(shape) != 4 or shape[0] < AUTO_THREADS_BATCH:
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -283,10 +305,10 @@ class Refiner:
         if anchor_quality is None and (quality == "pose" or anchor_method == "posterior"):
             raise ValueError("quality='pose' and anchor_method='posterior' need an `anchor_quality` model.")
         self.anchor_noise = anchor_noise
-        if not (threads is None or threads == "auto" or (isinstance(threads, int) and not isinstance(threads, bool)
-                                                         and threads >= 1)):
+        if not (threads is None or (isinstance(threads, str) and threads == "auto")
+                or (isinstance(threads, numbers.Integral) and not isinstance(threads, (bool, np.bool_)) and threads >= 1)):
             raise ValueError(f"`threads` must be a positive int, 'auto' or None; got {threads!r}.")
-        self.threads = threads
+        self.threads = threads if threads is None or isinstance(threads, str) else int(threads)
         self.skeleton = get_skeleton(skeleton).name
         self.action_names = tuple(action_names)
         self.mode = _check_mode(mode)
@@ -327,7 +349,8 @@ class Refiner:
                    manifest=manifest, **kwargs)
 
     @classmethod
-    def pretrained(cls, skeleton: str = "humanact12", *, split: str = "all", device: str = "cpu", **kwargs) -> "Refiner":
+    def pretrained(cls, skeleton: str = "humanact12", *, split: str = "all", device: str = "cpu",
+                   **kwargs) -> "Refiner | ConvertedRefiner":
         """The shipped weights: ``split="all"`` (default, all subjects) or ``"train"`` (subjects 1-10, for benchmarks).
 
         Weights are loaded on first use and verified against their manifest. They were trained on
@@ -366,19 +389,8 @@ class Refiner:
 
     def refine(self, seq, *, action=None, mode: str | None = None, return_report: bool = False):
         """Refine one clip or a batch; returns the same kind as given (see :func:`refine`)."""
-        if self.threads is None:
+        with thread_limits(self.threads_for(seq)):
             return self._refine(seq, action, mode, return_report)
-        import torch
-        from threadpoolctl import threadpool_limits
-
-        threads = self.threads_for(seq)
-        before = torch.get_num_threads()
-        torch.set_num_threads(threads)
-        try:
-            with threadpool_limits(threads):  # under load, free BLAS threads made a call 3-12x slower
-                return self._refine(seq, action, mode, return_report)
-        finally:
-            torch.set_num_threads(before)
 
     def _refine(self, seq, action, mode, return_report):
         mode = _check_mode(self.mode if mode is None else mode)

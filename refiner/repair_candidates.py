@@ -130,7 +130,11 @@ def spline_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, context: int
         return out
     t = np.arange(a, c, dtype=np.float64)
     seg = y[a:c].reshape(c - a, -1).astype(np.float64)
-    fit = make_smoothing_spline(t, seg)(t).reshape(c - a, *y.shape[1:])
+    try:
+        fit = make_smoothing_spline(t, seg)(t)
+    except ValueError:  # scipy before n-D ordinates: one spline per coordinate
+        fit = np.stack([make_smoothing_spline(t, seg[:, k])(t) for k in range(seg.shape[1])], 1)
+    fit = fit.reshape(c - a, *y.shape[1:])
     out[lo:hi] = fit[lo - a : hi - a].astype(y.dtype)
     return out
 

@@ -106,3 +106,24 @@ def test_refined_generator_on_uestc_with_real_ntu13_samples():
 
     raw = adapter_convert("action2motion", samples[:3], representation="xyz", skeleton="uestc")
     assert np.mean([bone_length_variation(m) for m in motions]) < 0.5 * np.mean([bone_length_variation(m) for m in raw])
+
+
+@pytest.mark.real_data
+def test_own_labels_refine_action_agnostic_short_clips_stay_and_errors_name_the_clip(held_out):
+    model = Refiner.pretrained("uestc")
+    u = convert(held_out[0].joints, "humanact12", "uestc").astype(np.float32)
+    _, report = model.refine(Motion(u, skeleton="uestc", action=35), return_report=True)  # a UESTC label
+    assert "refined action-agnostic" in report.notes[-1]
+    _, report = model.refine(u, action="walk", return_report=True)  # a HumanAct12 name is used
+    assert report.action == list(model.action_names).index("walk") and not any("agnostic" in n for n in report.notes)
+    short = u[:5] + np.random.default_rng(0).normal(0, 0.01, u[:5].shape).astype(np.float32)  # stretching bones
+    out, report = model.refine(short, return_report=True)
+    np.testing.assert_array_equal(out, short)
+    assert report.changes == [] and "returned unchanged" in report.note
+    with pytest.raises(ValueError, match=r"^`seq` has bones .* metres"):
+        model.refine(u * 100)
+    with pytest.raises(ValueError, match=r"^clip 1 of 2: `seq` has bones"):
+        model.refine(np.stack([u, u * 100]))
+    with pytest.raises(ValueError, match="rigid_tolerance"):
+        Refiner.pretrained("uestc", rigid_tolerance=None)
+    assert model.threads_for(u) == 1 and model.threads == "auto"
