@@ -93,7 +93,7 @@ class ConvertedRefiner:
             return self._refine(seq, action, mode, return_report)
 
     def _refine(self, seq, action, mode, return_report):
-        from refiner.pipeline import MIN_FRAMES, _check_metres
+        from refiner.pipeline import MIN_FRAMES, check_metres_each
 
         if isinstance(seq, Motion):
             if seq.skeleton != self.skeleton:
@@ -104,14 +104,7 @@ class ConvertedRefiner:
         batched = len(getattr(seq, "shape", np.shape(seq))) == 4
         x = check_joints(seq, skeleton=self.skeleton, batched=batched)
         clips = x if batched else x[None]
-        skel = get_skeleton(self.skeleton)
-        for i, clip in enumerate(clips):
-            try:
-                _check_metres(clip, skel)
-            except ValueError as e:
-                if not batched:
-                    raise
-                raise ValueError(f"clip {i} of {len(clips)}: {e}") from e
+        check_metres_each(clips, get_skeleton(self.skeleton), batched)
         actions = list(action) if batched and isinstance(action, (list, tuple, np.ndarray)) else [action] * len(clips)
         if len(actions) != len(clips):
             raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")

@@ -411,13 +411,7 @@ class Refiner:
         batched = ndim == 4
         x = check_joints(seq, skeleton=skel, batched=batched)
         clips = x if batched else x[None]
-        for i, clip in enumerate(clips):  # per clip: one clip in centimetres must not hide in a batch's median
-            try:
-                _check_metres(clip, skel)
-            except ValueError as e:
-                if not batched:
-                    raise
-                raise ValueError(f"clip {i} of {len(clips)}: {e}") from e
+        check_metres_each(clips, skel, batched)
         actions = action if (batched and isinstance(action, (list, tuple, np.ndarray))) else [action] * len(clips)
         if len(actions) != len(clips):
             raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
@@ -701,6 +695,18 @@ def _reference_lengths(x: np.ndarray, skeleton: str) -> np.ndarray:
     median = np.median(lengths, axis=0)
     rigid = lengths.std(0) < 0.02 * np.maximum(median, 1e-9)
     return np.where(rigid, median, lengths)
+
+
+def check_metres_each(clips: np.ndarray, skel, batched: bool) -> None:
+    """:func:`_check_metres` per clip of ``clips (B, T, J, 3)`` (one clip in centimetres must not hide in a
+    batch's median), naming the clip when the input was a batch."""
+    for i, clip in enumerate(clips):
+        try:
+            _check_metres(clip, skel)
+        except ValueError as e:
+            if not batched:
+                raise
+            raise ValueError(f"clip {i} of {len(clips)}: {e}") from e
 
 
 def _check_metres(x: np.ndarray, skel) -> None:
