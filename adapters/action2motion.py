@@ -20,7 +20,7 @@ from refiner.adapters.base import (
     recenter as _recenter,
     reference_bone_lengths,
 )
-from refiner.motion import Motion
+from refiner.core.motion import Motion
 from refiner.plugins import hookimpl
 
 __all__ = ["INFO", "joints_to_lie", "lie_to_joints", "to_motions", "xyz_to_joints"]

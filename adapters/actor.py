@@ -19,10 +19,10 @@ from typing import Any, Sequence
 import numpy as np
 
 from refiner.adapters.base import AdapterInfo, call_with_options, check_raw, resolve_path, rot6d_to_rotmat
-from refiner.motion import Motion
+from refiner.core.motion import Motion
+from refiner.core.safe_pickle import load_pickle
+from refiner.core.validation import to_numpy
 from refiner.plugins import hookimpl
-from refiner.safe_pickle import load_pickle
-from refiner.validation import to_numpy
 
 __all__ = [
     "A2M_JOINTS",

@@ -14,7 +14,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from refiner.validation import to_numpy
+from refiner.core.validation import to_numpy
 
 __all__ = [
     "AdapterInfo",

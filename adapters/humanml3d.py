@@ -12,9 +12,9 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from refiner.adapters.base import call_with_options, check_raw, recenter, yup_to_ydown
-from refiner.motion import Motion
-from refiner.skeleton_conversion import HAND_LENGTH, add_hands, convert
-from refiner.validation import to_numpy
+from refiner.core.motion import Motion
+from refiner.core.skeleton_conversion import HAND_LENGTH, add_hands, convert
+from refiner.core.validation import to_numpy
 
 __all__ = [
     "N_FEATURES",
@@ -152,7 +152,7 @@ def to_uestc(joints) -> np.ndarray:
     """HumanML3D joints ``(..., T, 22, 3)`` (y up) to the 18-joint NTU-VIBE / UESTC layout (§7.2).
 
     Fourteen joints correspond directly. Nose, heels and head top are mesh points without a
-    skeleton equivalent and are *estimated* (:func:`refiner.skeletons.convert`): nose = head + 0.10 m forward +
+    skeleton equivalent and are *estimated* (:func:`refiner.core.skeletons.convert`): nose = head + 0.10 m forward +
     0.05 m up; head top = head + 0.20 m up; heel = ankle + 0.055 m backward along the foot
     (ankle - foot, horizontal) - 0.04 m vertically. "Up" is the torso axis pelvis -> neck and
     "forward" the facing from hips and shoulders. Then the same 180-degree x rotation and frame-0

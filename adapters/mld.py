@@ -12,7 +12,7 @@ import numpy as np
 
 from refiner.adapters import actor
 from refiner.adapters.base import AdapterInfo, call_with_options, check_raw
-from refiner.motion import Motion
+from refiner.core.motion import Motion
 from refiner.plugins import hookimpl
 
 __all__ = ["INFO", "actor_to_features", "features_to_actor", "to_motions"]

@@ -10,7 +10,7 @@ from typing import Any, Mapping, Sequence
 
 from refiner.adapters.base import AdapterInfo
 from refiner.adapters.humanml3d import HAND_LENGTH, convert_output, features_to_motions
-from refiner.motion import Motion
+from refiner.core.motion import Motion
 from refiner.plugins import hookimpl
 
 __all__ = ["INFO", "to_motions"]

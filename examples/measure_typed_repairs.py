@@ -1,5 +1,5 @@
 """Measure the learned refiner's repair choices on the calibration subjects (the figures behind
-``refiner.learned_pipeline.TYPED_REPAIRS`` and ``VERIFY_TYPED``).
+``refiner.refinement.learned_pipeline.TYPED_REPAIRS`` and ``VERIFY_TYPED``).
 
 Usage::
 
@@ -23,11 +23,11 @@ import numpy as np
 import torch
 from threadpoolctl import threadpool_limits
 
-import refiner.learned_pipeline as lp
-from refiner.datasets import load_humanact12
-from refiner.flaw_classifier import FlawClassifier
-from refiner.flaws import FLAW_FAMILIES, corrupt
-from refiner.pipeline import Refiner
+import refiner.refinement.learned_pipeline as lp
+from refiner.evaluation.flaws import FLAW_FAMILIES, corrupt
+from refiner.io.datasets import load_humanact12
+from refiner.refinement.flaw_classifier import FlawClassifier
+from refiner.refinement.pipeline import Refiner
 
 torch.set_num_threads(1)
 threadpool_limits(1)

@@ -13,7 +13,7 @@ import pluggy
 
 if TYPE_CHECKING:
     from refiner.adapters.base import AdapterInfo
-    from refiner.motion import Motion
+    from refiner.core.motion import Motion
 
 __all__ = [
     "hookspec",

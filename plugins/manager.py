@@ -18,7 +18,7 @@ from refiner.plugins import PROJECT_NAME, hookspecs
 
 if TYPE_CHECKING:
     from refiner.adapters.base import AdapterInfo
-    from refiner.motion import Motion
+    from refiner.core.motion import Motion
 
 __all__ = [
     "AdapterPluginError",
@@ -176,7 +176,7 @@ class PluginManager(pluggy.PluginManager):
             Unknown adapter, a skeleton the adapter cannot produce, or whatever the adapter
             rejects in *output* / *options* (an :class:`AdapterPluginError` naming the plugin).
         """
-        from refiner.motion import Motion
+        from refiner.core.motion import Motion
 
         info = self.get_adapter(adapter)
         if skeleton is not None and skeleton not in info.skeletons:
@@ -312,7 +312,7 @@ def _validate(pm: PluginManager, plugin: object, name: str) -> str | None:
     """Why *plugin* cannot be used (misspelled hook, bad adapter info), or None; taken names are refused by
     :meth:`PluginManager.register`."""
     from refiner.adapters.base import AdapterInfo
-    from refiner.skeletons import list_skeletons
+    from refiner.core.skeletons import list_skeletons
 
     for caller in pm.get_hookcallers(plugin) or []:
         if not caller.has_spec() and any(

@@ -1,9 +1,12 @@
 """motion-refiner: refine synthesized 3D human motion with unsupervised learned motion concepts."""
 from __future__ import annotations
 
-from refiner.generators import RefinedGenerator
-from refiner.motion import Motion, stack_motions, unstack_motions
-from refiner.skeletons import Skeleton, get_skeleton, list_skeletons, register_skeleton
+from refiner.core import moved_modules as _moved_modules
+from refiner.core.motion import Motion, stack_motions, unstack_motions
+from refiner.core.skeletons import Skeleton, get_skeleton, list_skeletons, register_skeleton
+from refiner.refinement.refined_generator import RefinedGenerator
+
+_moved_modules.install()
 
 __all__ = [
     "Motion",
@@ -21,7 +24,7 @@ __all__ = [
 ]
 
 
-_LAZY = {"refine": "refiner.pipeline", "Refiner": "refiner.pipeline", "RefinementReport": "refiner.pipeline"}
+_LAZY = {"refine": "refiner.refinement.pipeline", "Refiner": "refiner.refinement.pipeline", "RefinementReport": "refiner.refinement.pipeline"}
 
 
 def __getattr__(name):

@@ -1,6 +1,6 @@
 """``python -m refiner`` is ``motion-refiner``."""
 import sys
 
-from refiner.cli import main
+from refiner.cli.main import main
 
 sys.exit(main())

@@ -23,7 +23,7 @@ def bench_json(suite: str, out: Path) -> dict:
     """Run ``motion-refiner bench SUITE --quick --out OUT`` on the real data; its ``<suite>.json``."""
     import json
 
-    from refiner.cli import main
+    from refiner.cli.main import main
 
     assert main(["bench", suite, "--quick", "--data", str(shared_data_dir()), "--out", str(out)]) == 0
     return json.loads((Path(out) / f"{suite}.json").read_text())
@@ -51,7 +51,7 @@ def tiny_clip():
 @pytest.fixture(scope="session")
 def humanact12():
     """All 1,191 real HumanAct12 clips; fails (not skips) when the data are missing."""
-    from refiner.datasets import load_humanact12
+    from refiner.io.datasets import load_humanact12
 
     path = shared_data_dir() / "humanact12" / "humanact12_joints.npz"
     if not path.is_file():

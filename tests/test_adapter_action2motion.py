@@ -7,8 +7,8 @@ from conftest import shared_dir
 
 from refiner.adapters import action2motion as a2m
 from refiner.adapters.base import LIE_KINEMATICS, reference_bone_lengths
-from refiner.motion import Motion
-from refiner.skeletons import get_skeleton
+from refiner.core.motion import Motion
+from refiner.core.skeletons import get_skeleton
 
 SAMPLES = shared_dir() / "samples" / "action2motion"
 EVALUATORS = shared_dir() / "evaluators"
@@ -104,7 +104,7 @@ def test_xyz_samples_convert_unchanged():
 def _recognizer_accuracy(joints, labels, seeds=(0, 1, 2, 3, 4)):
     """Mean accuracy of the HumanAct12 GRU recogniser over several random initial hidden states."""
     try:
-        from refiner.evaluators import load_recognizer
+        from refiner.evaluation.evaluators import load_recognizer
     except ImportError:
         return _local_recognizer_accuracy(joints, labels, seeds)
     rec = load_recognizer("humanact12", directory=EVALUATORS)
@@ -113,7 +113,7 @@ def _recognizer_accuracy(joints, labels, seeds=(0, 1, 2, 3, 4)):
 
 
 def _local_recognizer_accuracy(joints, labels, seeds):
-    """Fallback when refiner.evaluators is not there: the §8.2 network written out here."""
+    """Fallback when refiner.evaluation.evaluators is not there: the §8.2 network written out here."""
     import torch
     from safetensors.torch import load_file
 

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from refiner.anchors import AnchorConcepts
-from refiner.validation import NotFittedError
+from refiner.concepts.anchors import AnchorConcepts
+from refiner.core.validation import NotFittedError
 
 
 def _blobs(rng, n_actions=2, per=30):

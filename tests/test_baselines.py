@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from refiner.baselines import (
+from refiner.evaluation.baselines import (
     FLAW_REFINERS,
     GaussianRefiner,
     IdentityRefiner,
@@ -12,8 +12,8 @@ from refiner.baselines import (
     SplineFitRefiner,
     clean_clip_change,
 )
-from refiner.motion import Motion
-from refiner.physics import acceleration
+from refiner.core.motion import Motion
+from refiner.evaluation.physics import acceleration
 
 BASELINES = [IdentityRefiner, SavgolRefiner, GaussianRefiner, SplineFitRefiner]
 

@@ -7,8 +7,8 @@ import math
 import pytest
 from conftest import bench_json
 
-from refiner.bench import SUITES
-from refiner.cli import main
+from refiner.cli.main import main
+from refiner.evaluation.bench import SUITES
 
 
 def test_suites_are_registered():
@@ -18,9 +18,9 @@ def test_suites_are_registered():
 @pytest.mark.real_data
 def test_flaw_records_on_a_few_clips(humanact12):
     """The flaws bench's records on 4 held-out clips and 3 families: identity is the flaw, oracles fix it."""
-    from refiner.baselines import IdentityRefiner, SavgolRefiner
-    from refiner.bench_flaws import ORACLES, flaw_records
-    from refiner.pipeline import Refiner
+    from refiner.evaluation.baselines import IdentityRefiner, SavgolRefiner
+    from refiner.evaluation.bench_flaws import ORACLES, flaw_records
+    from refiner.refinement.pipeline import Refiner
 
     clips = humanact12.split("test").motions[:40:10]
     model = Refiner.pretrained("humanact12", split="train")
@@ -45,9 +45,9 @@ def test_flaw_records_on_a_few_clips(humanact12):
 @pytest.mark.slow
 def test_bench_flaws_quick(tmp_path):
     """4 held-out clips, every family: no refiner is skipped, identity is the flaw, ours removes some of it."""
-    from refiner.baselines import FLAW_REFINERS
-    from refiner.bench_flaws import ORACLES
-    from refiner.flaws import FLAW_FAMILIES
+    from refiner.evaluation.baselines import FLAW_REFINERS
+    from refiner.evaluation.bench_flaws import ORACLES
+    from refiner.evaluation.flaws import FLAW_FAMILIES
 
     rec = bench_json("flaws", tmp_path)
     assert rec["skipped"] == {}, rec["skipped"]  # a refiner that could not be built fails the test

@@ -1,4 +1,4 @@
-"""Tests of refiner.bvh: exact round trips on real and rigid synthetic motions, the reader's conventions, errors."""
+"""Tests of refiner.io.bvh: exact round trips on real and rigid synthetic motions, the reader's conventions, errors."""
 from __future__ import annotations
 
 import warnings
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from refiner.bvh import bvh_frame, load_bvh, load_bvh_motion, save_bvh
-from refiner.motion import Motion
-from refiner.skeletons import get_skeleton, list_skeletons
+from refiner.core.motion import Motion
+from refiner.core.skeletons import get_skeleton, list_skeletons
+from refiner.io.bvh import bvh_frame, load_bvh, load_bvh_motion, save_bvh
 
 
 def _rigid_motion(skeleton: str, n_frames: int, rng) -> np.ndarray:

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from refiner.cli import main
+from refiner.cli.main import main
 
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -21,7 +21,7 @@ def clip(humanact12):
 
 @pytest.mark.real_data
 def test_round_trip_with_report_gif_and_bvh(clip, tmp_path, capsys):
-    from refiner.bvh import load_bvh
+    from refiner.io.bvh import load_bvh
 
     src = tmp_path / "walk.npy"
     np.save(src, clip)

@@ -3,13 +3,13 @@ import numpy as np
 import pytest
 from sklearn.mixture import GaussianMixture
 
-from refiner.anchor_refinement import AnchorRefiner
-from refiner.anchors import AnchorConcepts
-from refiner.recognition import AnchorRecognizer, anchor_targets, gmm_log_likelihood, match_anchors
-from refiner.transition_refinement import TransitionRefiner, transition_layout
-from refiner.transitions import TransitionGenerator, collect_transitions
-from refiner.segmentation import segment
-from refiner.validation import NotFittedError
+from refiner.concepts.anchors import AnchorConcepts
+from refiner.concepts.segmentation import segment
+from refiner.concepts.transitions import TransitionGenerator, collect_transitions
+from refiner.core.validation import NotFittedError
+from refiner.refinement.anchor_refinement import AnchorRefiner
+from refiner.refinement.recognition import AnchorRecognizer, anchor_targets, gmm_log_likelihood, match_anchors
+from refiner.refinement.transition_refinement import TransitionRefiner, transition_layout
 
 TINY = dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16, n_epochs=2, steps_per_epoch=1, batch_size=8, device="cpu")
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from refiner.concepts import MotionConcepts, learn_concepts
+from refiner.concepts.learning import MotionConcepts, learn_concepts
 
 
 @pytest.mark.real_data

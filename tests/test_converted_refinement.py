@@ -1,14 +1,14 @@
-"""Skeletons without weights of their own are refined through the HumanAct12 weights (refiner.converted_refinement)."""
+"""Skeletons without weights of their own are refined through the HumanAct12 weights (refiner.refinement.converted_refinement)."""
 import numpy as np
 import pytest
 import torch
 
 import refiner
 from refiner import Motion
-from refiner.converted_refinement import FLEXIBLE_BONES, ConvertedRefiner
-from refiner.flaws import frozen_transition
-from refiner.pipeline import Refiner
-from refiner.skeletons import Skeleton, bone_lengths, convert, get_skeleton, joint_bone_lengths, with_bone_lengths
+from refiner.core.skeletons import Skeleton, bone_lengths, convert, get_skeleton, joint_bone_lengths, with_bone_lengths
+from refiner.evaluation.flaws import frozen_transition
+from refiner.refinement.converted_refinement import FLEXIBLE_BONES, ConvertedRefiner
+from refiner.refinement.pipeline import Refiner
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +27,7 @@ def test_clean_clips_come_back_exactly_and_say_how(held_out, skeleton):
         out, report = model.refine(x, return_report=True)
         np.testing.assert_array_equal(x, before)  # input untouched
         np.testing.assert_array_equal(out, x)
-        assert report.changes == [] and "through refiner.skeletons.convert" in report.notes[-1]
+        assert report.changes == [] and "through refiner.core.skeletons.convert" in report.notes[-1]
 
 
 @pytest.mark.real_data
@@ -79,7 +79,7 @@ def test_stretching_uestc_bones_come_back_rigid_but_bending_chains_stay_free(hel
 
 
 def test_skeletons_the_conversion_cannot_reach_still_have_no_weights():
-    from refiner.skeletons import register_skeleton
+    from refiner.core.skeletons import register_skeleton
 
     register_skeleton(Skeleton("toy_unconvertible", ("root", "a", "b"), (-1, 0, 1), up="-y", forward="-z"),
                       overwrite=True)
@@ -101,7 +101,7 @@ def test_refined_generator_on_uestc_with_real_ntu13_samples():
                                    adapter_options={"representation": "xyz", "skeleton": "uestc"})
     motions = gen.sample(None, n=3)
     assert [m.skeleton for m in motions] == ["uestc"] * 3 and motions[0].joints.shape == (60, 18, 3)
-    from refiner.physics import bone_length_variation
+    from refiner.evaluation.physics import bone_length_variation
     from refiner.plugins.manager import convert as adapter_convert
 
     raw = adapter_convert("action2motion", samples[:3], representation="xyz", skeleton="uestc")

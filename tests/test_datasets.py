@@ -3,7 +3,7 @@ import pickle
 import numpy as np
 import pytest
 
-from refiner.datasets import HUMANACT12_ACTIONS, load_humanact12, parse_humanact12_name
+from refiner.io.datasets import HUMANACT12_ACTIONS, load_humanact12, parse_humanact12_name
 
 pytestmark = pytest.mark.real_data
 

@@ -7,7 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
-from refiner.cli import main
+from refiner.cli.main import main
 
 PER_ACTION = ("{}.gif", "{}_keyframes.png", "{}_scores.png", "{}_before.npy", "{}_after.npy", "{}_report.json")
 
@@ -75,7 +75,7 @@ def test_quick_demo_writes_every_file(demo_run):
 @pytest.mark.real_data
 def test_demo_recogniser_confidence_matches_a_direct_call(demo_run):
     """The table's 'before' confidence is the recogniser's softmax of the saved clip (fixed hidden state)."""
-    from refiner.evaluators import load_recognizer
+    from refiner.evaluation.evaluators import load_recognizer
 
     out, _ = demo_run
     summary = json.loads((out / "summary.json").read_text())
@@ -91,14 +91,14 @@ def test_demo_recogniser_confidence_matches_a_direct_call(demo_run):
 @pytest.mark.real_data
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="ffmpeg not on PATH")
 def test_demo_writes_mp4_when_ffmpeg_exists(tmp_path):
-    from refiner.demo import run_demo
+    from refiner.cli.demo import run_demo
 
     result = run_demo(tmp_path, actions=["jump"], quick=True)
     assert (tmp_path / "03_jump.mp4").is_file() and "03_jump.mp4" in result.rows[0].files
 
 
 def test_demo_rejects_unknown_generator_and_action(tmp_path):
-    from refiner.demo import run_demo
+    from refiner.cli.demo import run_demo
 
     with pytest.raises(ValueError, match="unknown action 'fly'"):
         run_demo(tmp_path, actions=["fly"])
@@ -107,7 +107,7 @@ def test_demo_rejects_unknown_generator_and_action(tmp_path):
 
 
 def test_summary_row_says_total_for_counts_and_mean_for_confidence():
-    from refiner.demo import DemoRow, format_table
+    from refiner.cli.demo import DemoRow, format_table
 
     rows = [DemoRow(action=a, action_name=n, frames=60, frames_changed=c, anchors=3, flagged_anchors=1,
                     confidence_before=b, confidence_after=b, predicted_before=n, predicted_after=n, files=[])
@@ -119,7 +119,7 @@ def test_summary_row_says_total_for_counts_and_mean_for_confidence():
 @pytest.mark.real_data
 def test_demo_refuses_to_overwrite_its_files_without_force(demo_run, tmp_path, capsys):
     """Like `refine`: existing outputs are never replaced without --force, and nothing is written first."""
-    from refiner.demo import run_demo
+    from refiner.cli.demo import run_demo
 
     out, _ = demo_run
     before = (out / "summary.json").read_bytes()

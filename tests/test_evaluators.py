@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from refiner.evaluators import (
+from refiner.evaluation.evaluators import (
     HUMANACT12_FINE_CODES,
     RECOGNIZERS,
     ActionRecognizer,
@@ -15,7 +15,7 @@ from refiner.evaluators import (
     load_recognizer,
     load_recognizer_state,
 )
-from refiner.motion import Motion
+from refiner.core.motion import Motion
 
 
 def _evaluators():
@@ -37,7 +37,7 @@ def _tiny(hidden="random", random_state=0, n_frames=60):
 
 
 def test_evaluators_dir_is_beside_the_data():
-    from refiner.datasets import default_data_dir
+    from refiner.io.datasets import default_data_dir
 
     assert evaluators_dir() == default_data_dir().parent / "evaluators"
 
@@ -64,7 +64,7 @@ def test_cmu_recogniser_scale_and_length():
     """93.6 % published; needs 100-frame crops and raw CMU units / 20 (our metres x 0.886)."""
     from conftest import shared_data_dir
 
-    from refiner.datasets import load_cmu_mocap
+    from refiner.io.datasets import load_cmu_mocap
 
     cmu = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz")
     rec = load_recognizer("cmu_mocap", hidden="fixed", directory=_evaluators())
@@ -202,8 +202,8 @@ def test_shipped_humanact12_recogniser_is_verified_with_licence_and_provenance()
     """The packaged copy carries its MIT licence and source in a sha256-checked manifest."""
     import json
 
-    from refiner.evaluator_weights import EVALUATOR_WEIGHTS_DIR, LICENCE_FILE, packaged_recognizer
-    from refiner.manifest import content_sha256
+    from refiner.core.manifest import content_sha256
+    from refiner.evaluation.evaluator_weights import EVALUATOR_WEIGHTS_DIR, LICENCE_FILE, packaged_recognizer
 
     path = packaged_recognizer("humanact12")
     assert path == EVALUATOR_WEIGHTS_DIR / "humanact12_gru.safetensors"
@@ -221,7 +221,7 @@ def test_shipped_humanact12_recogniser_is_verified_with_licence_and_provenance()
 def test_shipped_recogniser_copy_is_refused_when_edited(tmp_path):
     import shutil
 
-    from refiner.evaluator_weights import EVALUATOR_WEIGHTS_DIR, packaged_recognizer
+    from refiner.evaluation.evaluator_weights import EVALUATOR_WEIGHTS_DIR, packaged_recognizer
 
     folder = tmp_path / "evaluators"
     shutil.copytree(EVALUATOR_WEIGHTS_DIR, folder)
@@ -238,7 +238,7 @@ def test_shipped_recogniser_copy_is_refused_when_edited(tmp_path):
 @pytest.mark.real_data
 def test_shipped_recogniser_gives_the_logits_of_the_shared_original(humanact12):
     """Same tensors as Action2Motion's .tar in ../shared: identical logits on real clips."""
-    from refiner.evaluator_weights import packaged_recognizer
+    from refiner.evaluation.evaluator_weights import packaged_recognizer
 
     shipped = load_recognizer("humanact12", hidden="fixed")  # no directory: the shipped copy
     assert load_recognizer_state(packaged_recognizer("humanact12")).keys() == shipped.state_dict().keys()

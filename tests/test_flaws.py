@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from refiner.flaws import FLAW_FAMILIES, SEVERITIES, Corruption, corrupt
-from refiner.motion import Motion
-from refiner.physics import foot_skating_ratio, heights
-from refiner.segmentation import segment
+from refiner.concepts.segmentation import segment
+from refiner.core.motion import Motion
+from refiner.evaluation.flaws import FLAW_FAMILIES, SEVERITIES, Corruption, corrupt
+from refiner.evaluation.physics import foot_skating_ratio, heights
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ import pytest
 
 from refiner import RefinedGenerator
 from refiner.adapters.action2motion import lie_to_joints
-from refiner.motion import Motion
+from refiner.core.motion import Motion
 
 REST = np.asarray(lie_to_joints(np.zeros((1, 72)), recenter=False)[0])
 
@@ -87,7 +87,7 @@ def test_plain_callables_as_generator_and_refiner(pm):
 
 
 def test_default_refiner_falls_back_to_identity_when_pipeline_missing(pm, monkeypatch, xyz_options):
-    monkeypatch.setitem(sys.modules, "refiner.pipeline", None)  # makes `import refiner.pipeline` fail
+    monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", None)  # makes `import refiner.refinement.pipeline` fail
     with pytest.warns(UserWarning, match="default refiner"):
         gen = RefinedGenerator(XyzVae(), adapter="action2motion", adapter_options=xyz_options, plugin_manager=pm)
     m = gen.sample(2)[0]
@@ -95,7 +95,7 @@ def test_default_refiner_falls_back_to_identity_when_pipeline_missing(pm, monkey
 
 
 def test_default_refiner_is_the_pretrained_pipeline(pm, monkeypatch, xyz_options):
-    """With refiner.pipeline importable, Refiner.pretrained(skeleton) is what gets used."""
+    """With refiner.refinement.pipeline importable, Refiner.pretrained(skeleton) is what gets used."""
     import types
 
     calls = []
@@ -106,7 +106,7 @@ def test_default_refiner_is_the_pretrained_pipeline(pm, monkeypatch, xyz_options
             calls.append(skeleton)
             return LiftingRefiner()
 
-    monkeypatch.setitem(sys.modules, "refiner.pipeline", types.SimpleNamespace(Refiner=FakeRefiner))
+    monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", types.SimpleNamespace(Refiner=FakeRefiner))
     gen = RefinedGenerator(XyzVae(), adapter="action2motion", adapter_options=xyz_options, plugin_manager=pm)
     assert calls == ["humanact12"] and isinstance(gen.refiner, LiftingRefiner)
 
@@ -115,7 +115,7 @@ def test_default_refiner_is_the_pretrained_pipeline(pm, monkeypatch, xyz_options
         def pretrained(cls, skeleton):
             raise ValueError("no shipped weights")
 
-    monkeypatch.setitem(sys.modules, "refiner.pipeline", types.SimpleNamespace(Refiner=NoWeights))
+    monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", types.SimpleNamespace(Refiner=NoWeights))
     with pytest.raises(ValueError, match=r"default refiner Refiner.pretrained\('uestc'\) failed: no shipped weights"):
         RefinedGenerator(XyzVae(), adapter="action2motion", skeleton="uestc", plugin_manager=pm)
 

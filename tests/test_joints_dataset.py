@@ -7,7 +7,7 @@ from collections import OrderedDict
 import numpy as np
 import pytest
 
-from refiner.joints_dataset import load_joints_dataset
+from refiner.io.joints_dataset import load_joints_dataset
 
 
 def _write_folder(folder, clips, labels, subjects=None):
@@ -108,7 +108,7 @@ def test_train_tiny_on_a_generated_folder(tmp_path, uestc_clips, one_torch_threa
     """`motion-refiner train --dataset joints` trains the paper's modules on 12 clips; the result
     loads, refines an 18-joint clip and says whose licence applies."""
     from refiner import Refiner
-    from refiner.cli import main
+    from refiner.cli.main import main
 
     clips, labels = uestc_clips
     data = _write_folder(tmp_path / "clips", clips, labels)

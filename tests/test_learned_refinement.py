@@ -3,12 +3,13 @@ import numpy as np
 import pytest
 import torch
 
-from refiner.flaw_networks import FlawRepairNet, FrameTransformerConfig, linear_infill, window_starts
-from refiner.learned_pipeline import flag_runs
-from refiner.skeletons import rigid_skeleton
-from refiner.physics import bone_length_variation
-from refiner.pipeline import Refiner
-from refiner.skeletons import joint_bone_lengths, with_bone_lengths
+from refiner.core.signal import linear_infill, window_starts
+from refiner.core.skeletons import rigid_skeleton
+from refiner.core.skeletons import joint_bone_lengths, with_bone_lengths
+from refiner.evaluation.physics import bone_length_variation
+from refiner.refinement.flaw_networks import FlawRepairNet, FrameTransformerConfig
+from refiner.refinement.learned_pipeline import flag_runs
+from refiner.refinement.pipeline import Refiner
 
 SHIPPED_TRAIN = Refiner.pretrained.__globals__["_WEIGHTS"] / "humanact12-train"
 
@@ -16,7 +17,7 @@ SHIPPED_TRAIN = Refiner.pretrained.__globals__["_WEIGHTS"] / "humanact12-train"
 @pytest.fixture(scope="module")
 def tiny_learned(humanact12, tmp_path_factory):
     """Both learned parts trained with the tiny configuration on 72 real clips, installed beside the shipped parts."""
-    from refiner.learned_training import train_learned_refiner
+    from refiner.refinement.train_learned import train_learned_refiner
 
     pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[::15][:6]]  # many subjects
     out = tmp_path_factory.mktemp("tiny_learned")
@@ -26,7 +27,7 @@ def tiny_learned(humanact12, tmp_path_factory):
 
 @pytest.mark.real_data
 def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
-    from refiner.learned_training import train_learned
+    from refiner.refinement.train_learned import train_learned
 
     refiner, out = tiny_learned
     assert refiner.method == "learned" and 0.05 <= refiner.flaw_recognizer.threshold_ <= 0.99
@@ -159,7 +160,7 @@ def test_learned_refiner_does_no_harm_and_reports(tiny_learned, humanact12):
 def test_train_cli_learned_tiny(tmp_path, capsys):
     from conftest import shared_data_dir
 
-    from refiner.cli import main
+    from refiner.cli.main import main
 
     data = shared_data_dir() / "humanact12" / "humanact12_joints.npz"
     args = ["train", "--learned", "--config", "tiny", "--device", "cpu", "--data", str(data), "--split", "train",
@@ -176,7 +177,7 @@ def test_train_cli_learned_tiny(tmp_path, capsys):
 @pytest.mark.real_data
 def test_flaw_features_see_what_flaws_break(humanact12):
     """Kinematic evidence: batch and single clip agree; jitter raises the residual, stretching the bone deviation."""
-    from refiner.flaw_features import N_FEATURES, flaw_features
+    from refiner.refinement.flaw_features import N_FEATURES, flaw_features
 
     clip = next(m for m in humanact12 if m.n_frames >= 50).joints[:50].astype(np.float64)
     batch = flaw_features(np.stack([clip, clip[::-1]]))
@@ -203,7 +204,7 @@ def test_flaw_classifier_tiny_fit_and_calibration(tiny_learned, humanact12):
     np.testing.assert_allclose(clf.predict(x), every[..., 0])
     clips = [humanact12[i].joints for i in range(40, 60)]
     th = clf.calibrate(clips, clip_rate=0.1)
-    from refiner.learned_refinement import _run_peak
+    from refiner.refinement.learned_refinement import _run_peak
 
     flagged = np.mean([_run_peak(clf.predict(c[None])[0], 2) > th for c in clips])
     assert th == clf.threshold_ and flagged <= 0.1 + 1e-9  # at most the asked share of clean clips
@@ -213,7 +214,7 @@ def test_flaw_classifier_tiny_fit_and_calibration(tiny_learned, humanact12):
 def test_flaw_classifier_trains_on_crops_made_rigid_like_the_refiner_sees_them(humanact12):
     """With ``rigid_tolerance`` the flawed training crops are put on rigid bones first (so their
     bone-deviation features are small), and the labels are what is left of each flaw."""
-    from refiner.flaw_classifier import FlawClassifier
+    from refiner.refinement.flaw_classifier import FlawClassifier
 
     clips = [m.joints for m in humanact12.subset(range(0, 240, 20))]
     feats = {}

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from refiner import metrics
-from refiner.metrics import (
+from refiner.evaluation import metrics
+from refiner.evaluation.metrics import (
     accuracy,
     action_fid,
     confidence_interval,
@@ -150,7 +150,7 @@ def test_inputs_are_validated_and_not_modified(rng):
 def test_evaluate_replicates_the_protocol(humanact12):
     from conftest import shared_dir
 
-    from refiner.evaluators import load_recognizer
+    from refiner.evaluation.evaluators import load_recognizer
 
     rec = load_recognizer("humanact12", directory=shared_dir() / "evaluators")
     test = humanact12.split("test").motions

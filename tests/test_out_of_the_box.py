@@ -13,7 +13,7 @@ import re
 import pytest
 
 from conftest import REPO
-from refiner.cli import main
+from refiner.cli.main import main
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -43,7 +43,7 @@ def _run(argv) -> tuple[int, str]:
 
 def test_demo_runs_without_shared_data(no_shared, tmp_path):
     """The README's main command (quick settings) needs only the package: GIFs, PNGs and the summary."""
-    from refiner.datasets import default_data_dir
+    from refiner.io.datasets import default_data_dir
 
     assert default_data_dir() == no_shared and not any(no_shared.iterdir())
     out = tmp_path / "runs" / "demo"
@@ -109,10 +109,10 @@ def test_doctor_prints_each_section(no_shared):
     ("load_cmu_mocap", ["cmu_mocap_labeled_joints.npz", "cmu_mocap/", "mocap.cs.cmu.edu"]),
 ])
 def test_data_not_found_names_env_files_and_source(no_shared, loader, files):
-    import refiner.datasets
+    import refiner.io.datasets
 
     with pytest.raises(ValueError) as err:
-        getattr(refiner.datasets, loader)()
+        getattr(refiner.io.datasets, loader)()
     msg = str(err.value).replace("<data>/", "")
     for part in ["$MOTION_REFINER_DATA", str(no_shared), "ericguo5513.github.io/action-to-motion", *files]:
         assert part.rstrip("/") in msg, part

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from refiner.motion import Motion
-from refiner.physics import (
+from refiner.core.motion import Motion
+from refiner.evaluation.physics import (
     acceleration,
     acceleration_error,
     bone_length_variation,

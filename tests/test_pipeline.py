@@ -5,8 +5,8 @@ import pytest
 import torch
 
 from refiner import Motion
-from refiner.pipeline import Refiner, project_bone_lengths, refine, splice
-from refiner.skeletons import bone_lengths, get_skeleton
+from refiner.core.skeletons import bone_lengths, get_skeleton
+from refiner.refinement.pipeline import Refiner, project_bone_lengths, refine, splice
 
 pytestmark = pytest.mark.real_data
 
@@ -14,7 +14,7 @@ pytestmark = pytest.mark.real_data
 @pytest.fixture(scope="session")
 def tiny_refiner(humanact12, tmp_path_factory):
     """The whole pipeline trained with the tiny configuration on 36 real clips (3 per action)."""
-    from refiner.trainer import train_refiner
+    from refiner.refinement.train_refiner import train_refiner
 
     pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[:3]]
     out = tmp_path_factory.mktemp("tiny_refiner")
@@ -185,7 +185,7 @@ def test_inputs_that_cannot_be_metres_are_refused(humanact12, change, match):
 def test_threads_auto_one_for_small_batches_more_for_large_and_restored():
     import torch
 
-    from refiner.pipeline import AUTO_THREADS_BATCH, Refiner, _auto_threads
+    from refiner.refinement.pipeline import AUTO_THREADS_BATCH, Refiner, _auto_threads
 
     assert _auto_threads(np.zeros((60, 24, 3))) == 1
     assert _auto_threads(np.zeros((AUTO_THREADS_BATCH - 1, 60, 24, 3))) == 1

@@ -13,9 +13,9 @@ import pytest
 
 from refiner.adapters import BUILTIN_ADAPTERS
 from refiner.adapters.base import AdapterInfo
+from refiner.core.skeletons import list_skeletons
 from refiner.plugins import get_plugin_manager, hookimpl, hookspecs
 from refiner.plugins.manager import DISABLE_AUTOLOAD_ENV, AdapterPluginWarning, get_adapter, list_adapters
-from refiner.skeletons import list_skeletons
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "third_party_adapter"
 HOOKS = ("refiner_adapter_info", "refiner_convert_output", "refiner_recognize_generator", "refiner_sample_generator")
@@ -222,7 +222,7 @@ def test_plugins_registered_by_hand(pm):
         def refiner_convert_output(self, adapter, output):
             if adapter != "handmade":
                 return None
-            from refiner.motion import Motion
+            from refiner.core.motion import Motion
 
             return [Motion(output)]
 
@@ -240,7 +240,7 @@ def test_plugins_registered_by_hand(pm):
 
 
 def test_adapters_command_lists_installed_adapters(capsys):
-    from refiner.cli import main
+    from refiner.cli.main import main
 
     assert main(["adapters", "--no-autoload"]) == 0
     out = capsys.readouterr().out.splitlines()
@@ -252,7 +252,7 @@ def test_adapters_command_lists_installed_adapters(capsys):
 
 
 def test_adapters_command_shows_where_plugins_come_from(example_installed, capsys):
-    from refiner.cli import main
+    from refiner.cli.main import main
 
     assert main(["adapters"]) == 0
     line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("toymotion"))
@@ -280,7 +280,7 @@ def test_import_refiner_stays_cheap():
 
 def test_a_plugin_answering_for_every_name_cannot_take_over_a_builtin():
     """The manager calls the plugin registered under the requested adapter name, and only that one."""
-    from refiner.motion import Motion
+    from refiner.core.motion import Motion
 
     pm = get_plugin_manager(autoload=False)
 
@@ -318,8 +318,8 @@ def test_a_second_plugin_claiming_a_taken_name_is_refused_naming_both(pm):
 
 
 def test_a_raising_convert_or_sample_hook_is_wrapped_naming_the_plugin(pm):
-    from refiner.generators import RefinedGenerator
     from refiner.plugins.manager import AdapterPluginError
+    from refiner.refinement.refined_generator import RefinedGenerator
 
     class Fragile:
         @hookimpl

@@ -6,14 +6,14 @@ import json
 import numpy as np
 import pytest
 
-from refiner.reference_generators import (
+from refiner.reference.models import (
     GENERATOR_KINDS,
     WEIGHTS_DIR,
     LieVAEGenerator,
     TransformerCVAEGenerator,
     load_reference_generator,
 )
-from refiner.validation import NotFittedError
+from refiner.core.validation import NotFittedError
 
 TINY = {
     LieVAEGenerator: dict(hidden=16, latent_dim=4),
@@ -90,7 +90,7 @@ def test_joint_output_is_recentred_by_the_adapter(tiny_fitted):
 
 
 def test_unfitted_and_bad_arguments(tiny_clip):
-    from refiner.motion import Motion
+    from refiner.core.motion import Motion
 
     for cls in TINY:
         with pytest.raises(NotFittedError):
@@ -129,8 +129,8 @@ def test_shipped_weights_manifest():
 @pytest.mark.real_data
 def test_shipped_generators_are_recognised(capsys):
     """Samples of the shipped generators are recognised well above chance (1/12) by the HumanAct12 recogniser."""
-    from refiner.evaluators import load_recognizer
-    from refiner.metrics import accuracy
+    from refiner.evaluation.evaluators import load_recognizer
+    from refiner.evaluation.metrics import accuracy
 
     recognizer = load_recognizer("humanact12", hidden="fixed")
     for kind in GENERATOR_KINDS:
@@ -146,7 +146,7 @@ def test_shipped_generators_are_recognised(capsys):
 def test_train_generator_command(tmp_path, capsys):
     from conftest import shared_data_dir
 
-    from refiner.cli import main
+    from refiner.cli.main import main
 
     data = shared_data_dir() / "humanact12" / "humanact12_joints.npz"
     assert main(["train-generator", "--kind", "actor", "--out", str(tmp_path), "--quick", "--data", str(data)]) == 0
@@ -163,7 +163,7 @@ def test_train_generator_command(tmp_path, capsys):
 @pytest.mark.real_data
 def test_lie_targets_are_smooth_and_decode_to_the_same_joints(humanact12):
     from refiner.adapters.action2motion import joints_to_lie, lie_to_joints
-    from refiner.reference_generators import lie_targets
+    from refiner.reference.models import lie_targets
 
     clips = [m.joints for m in humanact12.split("train").motions[:40]]
     ours = [lie_targets(c) for c in clips]
@@ -181,7 +181,7 @@ def test_lie_targets_are_smooth_and_decode_to_the_same_joints(humanact12):
 
 def test_unwrap_rotvecs_follows_a_rotation_through_pi():
     from refiner.adapters.base import rotmat_to_rotvec, rotvec_to_rotmat
-    from refiner.reference_generators import unwrap_rotvecs
+    from refiner.reference.models import unwrap_rotvecs
 
     angles = np.linspace(2.6, 3.7, 12)  # about z, through pi
     canonical = rotmat_to_rotvec(rotvec_to_rotmat(angles[:, None] * np.array([0.0, 0.0, 1.0])))

@@ -6,8 +6,8 @@ import pytest
 import torch
 
 import refiner
-from refiner.pipeline import Refiner
-from refiner.training import resolve_device
+from refiner.nn.training import resolve_device
+from refiner.refinement.pipeline import Refiner
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,7 @@ def test_batch_errors_name_the_clip_for_every_kind(flawed):
 
 
 def test_report_names_the_quantity_its_threshold_applies_to():
-    from refiner.pipeline import RefinementReport
+    from refiner.refinement.pipeline import RefinementReport
 
     concepts = RefinementReport(mode="full", n_frames=3, threshold=-32.158, anchor_scores=[-10.0],
                                 anchor_probability=[0.1, 0.9, 0.2]).to_dict()

@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from refiner.flaws import foot_sliding, frozen_transition, transition_jitter
-from refiner.foot_contact import planted_feet, planted_slip
-from refiner.pipeline import splice
-from refiner.repair_candidates import (CANDIDATES, planted_feet_run, smooth_run, spline_run, stall_retime_run)
-from refiner.skeletons import get_skeleton
+from refiner.core.contact import planted_feet, planted_slip
+from refiner.evaluation.flaws import foot_sliding, frozen_transition, transition_jitter
+from refiner.refinement.pipeline import splice
+from refiner.refinement.repair_candidates import (CANDIDATES, planted_feet_run, smooth_run, spline_run, stall_retime_run)
+from refiner.core.skeletons import get_skeleton
 
 SKEL = get_skeleton("humanact12")
 
@@ -109,7 +109,7 @@ class _Judge:
 def test_verified_typed_repair_is_kept_only_when_it_looks_more_real(rng, sign, expected):
     from types import SimpleNamespace
 
-    import refiner.learned_pipeline as lp
+    import refiner.refinement.learned_pipeline as lp
 
     y = (np.cumsum(rng.normal(0, 0.01, (40, 24, 3)), 0) + rng.normal(0, 0.01, (40, 24, 3))).astype(np.float32)
     groups = np.zeros((40, 4))

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from refiner.segmentation import _segment_naive, fit_costs, segment
-from refiner.splines import eval_spline, fit_spline
+from refiner.concepts.segmentation import _segment_naive, fit_costs, segment
+from refiner.concepts.splines import eval_spline, fit_spline
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -1,4 +1,4 @@
-"""Skeleton conversion (refiner.skeletons.convert, Motion.to) on real HumanAct12 and CMU clips."""
+"""Skeleton conversion (refiner.core.skeletons.convert, Motion.to) on real HumanAct12 and CMU clips."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 
 from conftest import shared_data_dir
 from refiner import Motion
-from refiner.skeletons import convert, estimated_joints, get_skeleton
+from refiner.core.skeletons import convert, estimated_joints, get_skeleton
 
 CONVERTIBLE = ("humanact12", "humanml3d", "uestc", "cmu_mocap")
 
@@ -20,7 +20,7 @@ def ha12_frames(humanact12):
 
 @pytest.fixture(scope="module")
 def cmu_frames():
-    from refiner.datasets import load_cmu_mocap
+    from refiner.io.datasets import load_cmu_mocap
 
     data = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz")
     return np.concatenate([m.joints for m in data.motions[::50]]).astype(np.float64)
@@ -113,7 +113,7 @@ def test_errors_name_the_known_skeletons():
 
 
 def test_unmapped_registered_skeleton_is_refused():
-    from refiner.skeletons import Skeleton
+    from refiner.core.skeletons import Skeleton
 
     two = Skeleton("two_joints_test", ("a", "b"), (-1, 0))  # not registered: a Skeleton is accepted as is
     with pytest.raises(ValueError, match="no joint mapping for skeleton 'two_joints_test'; convertible: cmu_mocap"):

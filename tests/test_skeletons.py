@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from refiner import Skeleton, get_skeleton, list_skeletons, register_skeleton
-from refiner.skeletons import bone_lengths
+from refiner.core.skeletons import bone_lengths
 
 
 @pytest.mark.parametrize("name, n_joints, up", [("humanact12", 24, "-y"), ("uestc", 18, "-y"),
@@ -31,7 +31,7 @@ def test_real_bone_lengths_are_constant(humanact12):
 def test_cmu_parents_are_rigid():
     from conftest import shared_data_dir
 
-    from refiner.datasets import load_cmu_mocap
+    from refiner.io.datasets import load_cmu_mocap
 
     cmu = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz")
     assert len(cmu) == 1088 and cmu.n_frames == 204079

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from refiner.flaws import FLAW_FAMILIES
-from refiner.training_flaws import (HELD_OUT_FAMILIES, MECHANISMS, TRAINING_FAMILIES, limb_joints, mirror_pairs,
+from refiner.evaluation.flaws import FLAW_FAMILIES
+from refiner.refinement.training_flaws import (HELD_OUT_FAMILIES, MECHANISMS, TRAINING_FAMILIES, limb_joints, mirror_pairs,
                                     synthesize)
 
 

@@ -1,12 +1,12 @@
-"""Tests of refiner.viz: rendered pixels of known poses, GIF frame counts, PNG strips and score plots."""
+"""Tests of refiner.io.viz: rendered pixels of known poses, GIF frame counts, PNG strips and score plots."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from PIL import Image
 
-from refiner import viz
-from refiner.motion import Motion
+from refiner.core.motion import Motion
+from refiner.io import viz
 
 # A T-pose in the HumanAct12 frame: metres, y DOWN, facing -z, the subject's left at +x.
 _TPOSE = np.array([

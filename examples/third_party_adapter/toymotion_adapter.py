@@ -12,7 +12,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from refiner.adapters.base import AdapterInfo, recenter, yup_to_ydown
-from refiner.motion import Motion
+from refiner.core.motion import Motion
 from refiner.plugins import hookimpl
 
 __all__ = ["INFO", "ToyMotionGenerator", "to_motions"]

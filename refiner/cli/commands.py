@@ -1,0 +1,393 @@
+"""Handlers of the ``demo``, ``refine`` and ``train-generator`` sub-commands of ``motion-refiner``.
+
+Each sub-command is a pair ``(add_arguments, run)`` registered in :data:`refiner.cli.main.COMMANDS`;
+``run`` returns the exit code. Like :mod:`refiner.cli.main`, this module writes to stdout.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "demo_arguments",
+    "demo_run",
+    "refine_arguments",
+    "refine_run",
+    "train_generator_arguments",
+    "train_generator_run",
+    "load_input",
+]
+
+
+# ----------------------------------------------------------------------------------------------
+# train-generator
+
+
+def train_generator_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--kind", required=True, choices=["a2m", "actor"],
+                   help="a2m: Action2Motion-style Lie GRU VAE; actor: ACTOR-style transformer CVAE")
+    p.add_argument("--out", type=Path, required=True,
+                   help="folder for <kind>.safetensors and manifest.json (refiner/weights/generators ships them)")
+    p.add_argument("--data", type=Path, default=None, help="HumanAct12 file or folder (default: ../shared/data/...)")
+    p.add_argument("--split", default="train", choices=["train", "all"], help="train = subjects 1-10 (shipped)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-seconds", type=float, default=None,
+                   help="training time limit (default none: fixed epochs with early stopping, reproducible)")
+    p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu, cuda, ...")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    p.add_argument("--quick", action="store_true", help="tiny network, a few steps (for tests)")
+
+
+def train_generator_run(args: argparse.Namespace) -> int:
+    from refiner.io.datasets import load_dataset
+    from refiner.reference.models import train_reference_generator
+
+    _set_threads(args.threads)
+    dataset = load_dataset("humanact12", args.data)
+    command = "motion-refiner train-generator " + " ".join(
+        shlex.quote(a) for a in (f"--kind={args.kind}", f"--out={args.out}", f"--split={args.split}", f"--seed={args.seed}")
+        + ((f"--max-seconds={args.max_seconds:g}",) if args.max_seconds else ())
+        + ((f"--threads={args.threads}",) if args.threads else ()) + (("--quick",) if args.quick else ()))
+    gen = train_reference_generator(args.kind, dataset, args.out, split=args.split, quick=args.quick,
+                                    max_seconds=args.max_seconds, random_state=args.seed, device=args.device,
+                                    verbose=True, command=command)
+    best = min((h["val"] for h in gen.history_ if "val" in h), default=float("nan"))
+    print(f"trained {type(gen).__name__} ({args.kind}) on HumanAct12 split {args.split!r}: "
+          f"{gen.n_parameters():,} parameters, {len(gen.history_)} epochs, best validation loss {best:.4f}, "
+          f"{gen.train_seconds_:.0f} s")
+    print(f"written to {args.out / (args.kind + '.safetensors')} (float16) and {args.out / 'manifest.json'}")
+    return 0
+
+
+
+# ----------------------------------------------------------------------------------------------
+# demo
+
+
+def demo_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=Path, required=True, help="output folder (created)")
+    p.add_argument("--generator", default="a2m", choices=["a2m", "actor"],
+                   help="reference generator: a2m (Lie GRU VAE, default) or actor (transformer CVAE)")
+    p.add_argument("--actions", default=None,
+                   help="comma-separated action names or indices (default: all 12; --quick: walk, boxing)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-mp4", action="store_true", help="GIF only, even when ffmpeg is on PATH")
+    p.add_argument("--quick", action="store_true", help="two actions and a small animation (for tests)")
+    p.add_argument("--force", action="store_true", help="replace the demo's files in an existing --out folder")
+    _gif_size_argument(p)
+    _threads_argument(p)
+
+
+def demo_run(args: argparse.Namespace) -> int:
+    from refiner.cli.demo import format_table, run_demo
+
+    _set_threads(args.threads)
+
+    actions = None if args.actions is None else [_int_or_str(a) for a in args.actions.split(",") if a.strip()]
+    print(f"sampling {'every action' if actions is None and not args.quick else 'the chosen actions'} from the "
+          f"{args.generator!r} reference generator, refining and drawing into {args.out} ...", flush=True)
+    result = run_demo(args.out, generator=args.generator, actions=actions, quick=args.quick, random_state=args.seed,
+                      mp4=False if args.no_mp4 else None, progress=True, gif_size=args.gif_size, overwrite=args.force)
+    print(format_table(result.rows))
+    print("confidence: the HumanAct12 recogniser's probability of the sampled action (hidden state fixed); "
+          "anchors flagged: flagged / recognised anchors.")
+    n_files = sum(len(r.files) for r in result.rows) + len(result.files)
+    print(f"{n_files} files written to {result.out} in {result.seconds:.1f} s "
+          f"(per action: .gif before/after, _keyframes.png, _scores.png, _before/_after.npy, _report.json)")
+    return 0
+
+
+# ----------------------------------------------------------------------------------------------
+# refine
+
+
+_SUFFIXES = (".npy", ".npz")
+
+
+def refine_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", type=Path, metavar="IN",
+                   help=".npy/.npz of joints (T, J, 3) or (N, T, J, 3), raw generator output with --adapter, "
+                        "or a folder of such files")
+    p.add_argument("-o", "--out", type=Path, required=True,
+                   help="output .npy for a single input, else a folder (<name>.npy per input)")
+    p.add_argument("--adapter", default=None, help="convert raw generator output with this adapter "
+                                                   "(`motion-refiner adapters` lists them)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="adapter option, repeatable (e.g. representation=lie); VALUE is parsed as JSON when it can be")
+    p.add_argument("--skeleton", default="humanact12", help="skeleton of the joints / adapter target")
+    p.add_argument("--action", default=None, help="action name or index for every clip (default: inferred)")
+    p.add_argument("--mode", default="full", choices=["full", "anchor", "transition"])
+    p.add_argument("--fps", type=float, default=20.0, help="frame rate of joint files (default 20)")
+    p.add_argument("--refiner", type=Path, default=None, help="folder of a saved refiner (default: shipped weights)")
+    p.add_argument("--report", action="store_true", help="write <out>.report.json next to each output")
+    p.add_argument("--gif", action="store_true", help="write a before/after <out>.gif next to each output")
+    _gif_size_argument(p)
+    p.add_argument("--bvh", action="store_true", help="write the refined motion as <out>.bvh (exact joint positions)")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    _threads_argument(p)
+
+
+def refine_run(args: argparse.Namespace) -> int:
+    from tqdm.auto import tqdm
+
+    from refiner.core.skeletons import get_skeleton
+    from refiner.plugins.manager import get_plugin_manager
+    from refiner.refinement.pipeline import Refiner
+
+    _set_threads(args.threads)
+    skeleton = get_skeleton(args.skeleton).name
+    options = _parse_options(args.option)
+    if options and args.adapter is None:
+        raise ValueError("`--option` needs `--adapter`.")
+    if args.input.is_dir():
+        inputs = sorted(p for p in args.input.iterdir() if p.is_file() and p.suffix.lower() in _SUFFIXES)
+        if not inputs:
+            raise ValueError(f"no .npy or .npz files in {str(args.input)!r}.")
+        if args.out.suffix.lower() in _SUFFIXES:
+            raise ValueError(f"IN is a folder, so `-o` must be a folder; got the file name {str(args.out)!r}.")
+        targets = [args.out / (p.stem + ".npy") for p in inputs]
+        clashes = sorted({t.name for t in targets if targets.count(t) > 1})
+        if clashes:  # refuse before writing anything: a second file would overwrite the first's result
+            names = ", ".join(p.name for p, t in zip(inputs, targets) if t.name in clashes)
+            raise ValueError(f"these inputs would all be written to the same output ({', '.join(clashes)}): "
+                             f"{names}; rename them or refine them one by one.")
+    elif args.input.is_file():
+        if args.input.suffix.lower() not in _SUFFIXES:
+            raise ValueError(f"IN must be a .npy or .npz file or a folder; got {str(args.input)!r}.")
+        inputs = [args.input]
+        targets = [args.out if args.out.suffix.lower() == ".npy" else args.out / (args.input.stem + ".npy")]
+    else:
+        raise ValueError(f"IN {str(args.input)!r} does not exist.")
+    refiner = Refiner.load(args.refiner) if args.refiner is not None else Refiner.pretrained(skeleton)
+    pm = get_plugin_manager() if args.adapter is not None else None
+    if pm is not None:
+        pm.get_adapter(args.adapter)  # an unknown adapter is a usage error, not a per-file failure
+
+    failed, done, changed_total, frames_total = [], 0, 0, 0
+    single = len(inputs) == 1  # a folder gets a bar over its files; one file says what it is doing
+    if single:
+        print(f"refining {inputs[0]}" + (" and drawing its GIF" if args.gif else "") + " ...", flush=True)
+    bar = tqdm(list(zip(inputs, targets)), desc="refine", unit="file", disable=single)
+    for path, target in bar:
+        bar.set_postfix_str(path.name)
+        try:
+            written, changed, frames = _refine_file(path, target, args, refiner, pm, skeleton, options,
+                                                    progress=single)
+        except (ValueError, TypeError, OSError) as e:
+            failed.append(path)
+            tqdm.write(f"FAILED {path}: {e}", file=sys.stderr)
+            continue
+        except Exception as e:  # noqa: BLE001 -- one bad file must not stop the batch; keep the trace
+            failed.append(path)
+            tqdm.write(f"FAILED {path}: unexpected {type(e).__name__}: {e}\n{traceback.format_exc()}", file=sys.stderr)
+            continue
+        done += 1
+        changed_total, frames_total = changed_total + changed, frames_total + frames
+        tqdm.write(f"refined {path} -> {', '.join(str(w) for w in written)} ({changed} of {frames} frames changed)")
+    print(f"refined {done} of {len(inputs)} file(s), {changed_total} of {frames_total} frames changed"
+          + (f"; {len(failed)} failed: " + ", ".join(p.name for p in failed) if failed else ""))
+    return 1 if failed else 0
+
+
+def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12", options: dict | None = None,
+               fps: float = 20.0, plugin_manager=None) -> tuple[list, bool]:
+    """Read one ``.npy``/``.npz`` file as canonical motions.
+
+    Parameters
+    ----------
+    path : path
+        ``.npy`` holding joints ``(T, J, 3)`` / ``(N, T, J, 3)`` (metres, the skeleton's frame) or a
+        generator's raw output; ``.npz`` holding one array, or named arrays (``joints``/``motion``/
+        ``output`` are looked for; an adapter gets them all as a dict when there are several), plus
+        optional per-clip labels under ``action``/``actions``/``labels``.
+    adapter : str, optional
+        Convert with this adapter (plugin) instead of reading joints.
+    skeleton : str, default="humanact12"
+    options : dict, optional
+        Adapter options.
+    fps : float, default=20.0
+        Frame rate of joint files.
+    plugin_manager : PluginManager, optional
+
+    Returns
+    -------
+    motions : list of Motion
+    batched : bool
+        Whether the file held a batch (written back as ``(N, T, J, 3)``).
+
+    Raises
+    ------
+    ValueError
+        Unreadable file, no usable array, wrong shape, or whatever the adapter rejects.
+    """
+    from refiner.core.motion import Motion
+
+    path = Path(path)
+    raw, labels = _read_array_file(path, want_dict=adapter is not None)
+    if adapter is not None:
+        from refiner.plugins.manager import get_plugin_manager
+
+        pm = plugin_manager if plugin_manager is not None else get_plugin_manager()
+        motions = pm.convert(adapter, raw, skeleton=skeleton, options=options or {})
+        batched = True
+    else:
+        arr = np.asarray(raw)
+        if arr.ndim not in (3, 4) or arr.shape[-1] != 3:
+            raise ValueError(f"{path.name}: joints must have shape (T, J, 3) or (N, T, J, 3); got {tuple(arr.shape)} "
+                             "(raw generator output needs --adapter).")
+        batched = arr.ndim == 4
+        motions = []
+        for i, clip in enumerate(arr if batched else arr[None]):
+            try:
+                motions.append(Motion(clip, skeleton=skeleton, fps=fps))
+            except ValueError as e:  # name the clip of a batch, whatever is wrong with it
+                raise ValueError(f"{path.name}: " + (f"clip {i} of {len(arr)}: " if batched else "") + str(e)) from e
+    if labels is not None:
+        labels = np.atleast_1d(labels)
+        if len(labels) not in (1, len(motions)):
+            raise ValueError(f"{path.name}: {len(labels)} action labels for {len(motions)} clips.")
+        labels = np.broadcast_to(labels, (len(motions),))
+        motions = [m if m.action is not None else Motion(m.joints, skeleton=m.skeleton, fps=m.fps, action=int(a))
+                   for m, a in zip(motions, labels)]
+    return motions, batched
+
+
+def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, options: dict, *,
+                 progress: bool = False):
+    """Refine one file and write its outputs (``progress``: a bar while drawing GIFs); returns
+    ``(paths written, frames changed, frames)``."""
+    if target.resolve() == path.resolve():
+        raise ValueError("the output would replace the input; choose another -o.")
+    motions, batched = load_input(path, adapter=args.adapter, skeleton=skeleton, options=options, fps=args.fps,
+                                  plugin_manager=pm)
+    n = len(motions)
+    ragged = len({m.n_frames for m in motions}) > 1
+    main_out = target.with_suffix(".npz") if ragged else target
+    stem = target.with_suffix("")
+    per_clip = [""] if n == 1 else [f"_{i:03d}" for i in range(n)]
+    outputs = [main_out]
+    if args.report:
+        outputs.append(Path(f"{stem}.report.json"))
+    if args.gif:
+        outputs += [Path(f"{stem}{s}.gif") for s in per_clip]
+    if args.bvh:
+        outputs += [Path(f"{stem}{s}.bvh") for s in per_clip]
+    existing = [str(o) for o in outputs if o.exists()]
+    if existing and not args.force:
+        raise ValueError(f"refusing to overwrite {', '.join(existing)}; pass --force.")
+
+    action = None if args.action is None else _int_or_str(args.action)
+    refined, reports = [], []
+    for i, motion in enumerate(motions):
+        try:
+            out, report = refiner.refine(motion, action=action, mode=args.mode, return_report=True)
+        except ValueError as e:
+            raise ValueError(f"clip {i} of {n}: {e}") from e
+        refined.append(out)
+        reports.append(report)
+
+    target.parent.mkdir(parents=True, exist_ok=True)
+    if ragged:
+        np.savez(main_out, **{f"clip_{i:03d}": m.joints for i, m in enumerate(refined)})
+    else:
+        stacked = np.stack([m.joints for m in refined])
+        np.save(main_out, stacked if batched else stacked[0])
+    written = [main_out]
+    if args.report:
+        payload = {"input": str(path), "output": str(main_out), "adapter": args.adapter, "mode": args.mode,
+                   "skeleton": skeleton, "clips": [r.to_dict() for r in reports]}
+        Path(f"{stem}.report.json").write_text(json.dumps(payload, indent=1) + "\n")
+        written.append(Path(f"{stem}.report.json"))
+    if args.gif:
+        from refiner.cli.demo import GIF_DPI
+        from refiner.io import viz
+
+        for s, before, after, report in zip(per_clip, motions, refined, reports):
+            written += viz.animate(before, after, flagged=report.flagged_anchors, path=Path(f"{stem}{s}.gif"),
+                                   labels=("input", "refined"), mp4=False, panel_size=args.gif_size / GIF_DPI,
+                                   dpi=GIF_DPI, progress=progress)
+    if args.bvh:
+        from refiner.io.bvh import save_bvh
+
+        for s, after in zip(per_clip, refined):
+            save_bvh(after, Path(f"{stem}{s}.bvh"), translations=True)
+            written.append(Path(f"{stem}{s}.bvh"))
+    changed = sum(int(r.changed_frames.sum()) for r in reports)
+    return written, changed, sum(r.n_frames for r in reports)
+
+
+def _read_array_file(path: Path, *, want_dict: bool):
+    """``(array or dict of arrays, labels or None)`` from a .npy / .npz file, without pickles."""
+    try:
+        data = np.load(path, allow_pickle=False)
+    except Exception as e:  # numpy raises several types for corrupt or pickled files
+        raise ValueError(f"{path.name} is not a readable .npy/.npz array file: {e}") from e
+    if isinstance(data, np.ndarray):
+        return data, None
+    with data:
+        arrays = {k: data[k] for k in data.files}
+    labels = next((arrays.pop(k) for k in ("action", "actions", "labels") if k in arrays), None)
+    if not arrays:
+        raise ValueError(f"{path.name} holds no arrays besides labels.")
+    for key in ("joints", "motion", "output"):
+        if key in arrays and not want_dict:
+            return arrays[key], labels
+    if len(arrays) == 1:
+        return next(iter(arrays.values())), labels
+    if want_dict:
+        return arrays, labels
+    raise ValueError(f"{path.name} holds several arrays ({', '.join(arrays)}); name the joints 'joints'.")
+
+
+def _gif_size_argument(p: argparse.ArgumentParser) -> None:
+    from refiner.cli.demo import GIF_PANEL_PX
+
+    p.add_argument("--gif-size", type=_positive_int, default=GIF_PANEL_PX, metavar="PX",
+                   help=f"edge of each GIF panel in pixels (default {GIF_PANEL_PX}; before/after side by side)")
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive int; got {text!r}")
+    return value
+
+
+def _threads_argument(p: argparse.ArgumentParser) -> None:
+    # The networks are small: on CPU one thread is several times faster than torch's default
+    # (on a busy 2-core machine a GRU step took 20 ms with 2 threads and 0.07 ms with 1).
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1: fastest for these networks)")
+
+
+def _set_threads(threads: int | None) -> None:
+    if threads is None:
+        return
+    if threads < 1:
+        raise ValueError(f"`--threads` must be a positive int; got {threads}.")
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def _parse_options(items) -> dict:
+    options = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"`--option` must be KEY=VALUE; got {item!r}.")
+        try:
+            options[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            options[key.strip()] = value
+    return options
+
+
+def _int_or_str(value: str):
+    value = value.strip()
+    return int(value) if value.lstrip("-").isdigit() else value

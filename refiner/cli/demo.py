@@ -1,0 +1,277 @@
+"""The demo: sample every action from a reference generator, refine it, and draw what changed.
+
+:func:`run_demo` wraps a shipped reference generator (:mod:`refiner.reference.models`) in a
+:class:`~refiner.refinement.refined_generator.RefinedGenerator`, samples one clip per HumanAct12 action, and writes
+for each action a before/after animation (GIF, plus MP4 when ffmpeg is on PATH), a key-frame
+strip with flagged anchors marked, a plot of the per-frame anchor probability with the anchors and
+flagged anchors, the motions as ``.npy`` and the refinement report as JSON. The HumanAct12
+recogniser (hidden state ``"fixed"``, so before and after see the same noise) scores each clip.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table"]
+
+#: Default edge of one GIF panel in pixels (the demo's and ``refine --gif``'s before/after animations).
+GIF_PANEL_PX = 320
+#: Resolution the GIFs are drawn at; a panel is ``GIF_PANEL_PX / GIF_DPI`` inches.
+GIF_DPI = 80
+
+
+@dataclass
+class DemoRow:
+    """One action of the demo.
+
+    Attributes
+    ----------
+    action, action_name : int, str
+    frames : int
+    frames_changed : int
+        Frames the refiner changed.
+    anchors, flagged_anchors : int
+        Anchors found and anchors flagged as flawed.
+    confidence_before, confidence_after : float
+        Recogniser probability of the true action (softmax), before and after refinement.
+    predicted_before, predicted_after : str
+        Recogniser's top class names.
+    files : list of str
+        Files written for this action, relative to the output folder.
+    """
+
+    action: int
+    action_name: str
+    frames: int
+    frames_changed: int
+    anchors: int
+    flagged_anchors: int
+    confidence_before: float
+    confidence_after: float
+    predicted_before: str
+    predicted_after: str
+    files: list[str] = field(default_factory=list)
+
+
+@dataclass
+class DemoResult:
+    """What :func:`run_demo` did: one row per action, the summary files and the wall time."""
+
+    generator: str
+    out: Path
+    rows: list[DemoRow]
+    files: list[str]
+    seconds: float
+
+    def to_dict(self) -> dict:
+        return {"generator": self.generator, "out": str(self.out), "seconds": round(self.seconds, 2),
+                "rows": [asdict(r) for r in self.rows], "files": self.files}
+
+
+def run_demo(
+    out: str | os.PathLike,
+    *,
+    generator: str = "a2m",
+    actions: Sequence[int | str] | None = None,
+    quick: bool = False,
+    random_state: int = 0,
+    refiner: Any = None,
+    mp4: bool | None = None,
+    progress: bool = False,
+    generator_folder: str | os.PathLike | None = None,
+    recognizer_dir: str | os.PathLike | None = None,
+    gif_size: int = GIF_PANEL_PX,
+    overwrite: bool = False,
+) -> DemoResult:
+    """Sample, refine and visualise one clip per action.
+
+    Parameters
+    ----------
+    out : path
+        Output folder (created).
+    generator : {"a2m", "actor"}, default="a2m"
+        Which shipped reference generator to sample.
+    actions : sequence of int or str, optional
+        HumanAct12 actions; default all 12 (two with ``quick``).
+    quick : bool, default=False
+        Two actions and a small, short animation (for tests).
+    random_state : int, default=0
+        Seed of the samples; action ``a`` uses ``random_state + a``.
+    refiner : object, optional
+        Anything :class:`~refiner.refinement.refined_generator.RefinedGenerator` accepts; default
+        ``Refiner.pretrained("humanact12")``.
+    mp4 : bool, optional
+        Also write MP4 animations: None (default) when ffmpeg is on PATH.
+    progress : bool, default=False
+        Show a progress bar (stderr).
+    generator_folder : path, optional
+        Folder of generator weights; default the shipped ones.
+    recognizer_dir : path, optional
+        Folder of the Action2Motion recognisers; default the HumanAct12 recogniser shipped in the
+        package (:mod:`refiner.evaluation.evaluator_weights`), so the demo needs no data folder.
+    gif_size : int, default=GIF_PANEL_PX
+        Edge of each animation panel in pixels (``quick`` draws small ones regardless).
+    overwrite : bool, default=False
+        Replace files of a previous demo in ``out``; without it, any of the demo's files already there
+        is a ``ValueError`` raised before anything is written (the CLI's ``--force``).
+
+    Returns
+    -------
+    DemoResult
+
+    Raises
+    ------
+    ValueError
+        Unknown generator or action, missing weights or recogniser, a bad ``gif_size``, or files
+        of the demo already in ``out`` without ``overwrite``.
+    """
+    from tqdm.auto import tqdm
+
+    from refiner.core.validation import check_action
+    from refiner.evaluation.evaluators import load_recognizer
+    from refiner.io import viz
+    from refiner.io.datasets import HUMANACT12_ACTIONS
+    from refiner.plugins.manager import get_plugin_manager
+    from refiner.reference.models import load_reference_generator
+    from refiner.refinement.refined_generator import RefinedGenerator
+
+    started = time.perf_counter()
+    if isinstance(random_state, (bool, np.bool_)) or not isinstance(random_state, (int, np.integer)):
+        raise ValueError(f"`random_state` must be an int seed; got {random_state!r}.")
+    if actions is None:
+        actions = (1, 10) if quick else range(len(HUMANACT12_ACTIONS))
+    labels = [check_action(a, HUMANACT12_ACTIONS) for a in actions]
+    if not labels:
+        raise ValueError("`actions` must name at least one action; got none.")
+    if isinstance(gif_size, (bool, np.bool_)) or not isinstance(gif_size, (int, np.integer)) or gif_size < 1:
+        raise ValueError(f"`gif_size` must be a positive int (pixels); got {gif_size!r}.")
+    out = Path(out)
+    existing = _existing_outputs(out, [f"{a:02d}_{HUMANACT12_ACTIONS[a]}" for a in labels])
+    if existing and not overwrite:
+        shown = ", ".join(existing[:4]) + (f" and {len(existing) - 4} more" if len(existing) > 4 else "")
+        raise ValueError(f"refusing to overwrite {shown} in {str(out)!r}; pass --force (overwrite=True) "
+                         "or choose another --out.")
+    out.mkdir(parents=True, exist_ok=True)
+
+    gen = load_reference_generator(generator, folder=generator_folder)
+    pm = get_plugin_manager(autoload=False)
+    if refiner is None:
+        from refiner.refinement.pipeline import Refiner
+
+        refiner = Refiner.pretrained("humanact12")
+    wrapped = RefinedGenerator(gen, adapter=gen.adapter, refiner=refiner, skeleton="humanact12",
+                               adapter_options=gen.adapter_options(), plugin_manager=pm)
+    # The anchor detector's probability threshold, drawn on the score plots (0.5 for other refiners).
+    detect = float(getattr(getattr(refiner, "recognizer", None), "detect_threshold_", 0.5))
+    recognizer = load_recognizer("humanact12", hidden="fixed", directory=recognizer_dir)
+    n_frames = 24 if quick else None
+    gif = {"panel_size": 1.6, "dpi": 40} if quick else {"panel_size": gif_size / GIF_DPI, "dpi": GIF_DPI}
+
+    samples = []
+    for label in tqdm(labels, desc=f"demo ({generator})", disable=not progress, unit="action"):
+        after, raw, reports = wrapped.sample(label, n=1, return_raw=True, return_report=True,
+                                             random_state=random_state + label)
+        before = gen.to_motions(raw, label, plugin_manager=pm)[0]
+        after, report = after[0], reports[0]
+        stem = f"{label:02d}_{HUMANACT12_ACTIONS[label]}"
+        files = _write_action(out, stem, before, after, report, viz, gif, n_frames, mp4, detect)
+        samples.append((label, before, after, report, files))
+
+    befores = [s[1] for s in samples]
+    afters = [s[2] for s in samples]
+    p_before = _softmax(recognizer.predict_logits(befores, crop="start"))
+    p_after = _softmax(recognizer.predict_logits(afters, crop="start"))
+    names = recognizer.config.class_names
+    rows = []
+    for i, (label, before, after, report, files) in enumerate(samples):
+        rows.append(DemoRow(
+            action=label, action_name=HUMANACT12_ACTIONS[label], frames=before.n_frames,
+            frames_changed=int(report.changed_frames.sum()), anchors=len(report.anchors),
+            flagged_anchors=len(report.flagged_anchors),
+            confidence_before=round(float(p_before[i, label]), 4), confidence_after=round(float(p_after[i, label]), 4),
+            predicted_before=str(names[int(p_before[i].argmax())]), predicted_after=str(names[int(p_after[i].argmax())]),
+            files=files,
+        ))
+    result = DemoResult(generator=generator, out=out, rows=rows, files=["summary.json", "summary.md"],
+                        seconds=time.perf_counter() - started)
+    (out / "summary.md").write_text(f"# motion-refiner demo ({generator} reference generator)\n\n"
+                                    + format_table(rows) + "\n")
+    (out / "summary.json").write_text(json.dumps(result.to_dict(), indent=1) + "\n")
+    return result
+
+
+def format_table(rows: Sequence[DemoRow]) -> str:
+    """The demo's per-action table as Markdown."""
+    header = ["action", "frames changed", "anchors flagged", "confidence before", "confidence after",
+              "predicted before", "predicted after"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for r in rows:
+        lines.append(f"| {r.action_name} | {r.frames_changed}/{r.frames} | {r.flagged_anchors}/{r.anchors} | "
+                     f"{r.confidence_before:.3f} | {r.confidence_after:.3f} | {r.predicted_before} | "
+                     f"{r.predicted_after} |")
+    if rows:
+        mean_b = np.mean([r.confidence_before for r in rows])
+        mean_a = np.mean([r.confidence_after for r in rows])
+        lines.append(f"| **total; mean confidence** | {sum(r.frames_changed for r in rows)}/{sum(r.frames for r in rows)} | "
+                     f"{sum(r.flagged_anchors for r in rows)}/{sum(r.anchors for r in rows)} | {mean_b:.3f} | "
+                     f"{mean_a:.3f} | | |")
+    return "\n".join(lines)
+
+
+def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n_frames: int | None,
+                  mp4: bool | None, detect: float) -> list[str]:
+    """Every file of one action; returns their names."""
+    repaired = np.zeros(before.n_frames, bool)
+    for change in report.changes:
+        if change["step"] != "skeleton":  # the rigid-skeleton step touches every frame; it is not a flaw
+            repaired[change["start"] : change["stop"]] = True
+    flagged = sorted({int(f) for f in report.flagged_anchors} | set(np.flatnonzero(repaired).tolist()))
+    np.save(out / f"{stem}_before.npy", before.joints)
+    np.save(out / f"{stem}_after.npy", after.joints)
+    (out / f"{stem}_report.json").write_text(json.dumps(report.to_dict(), indent=1) + "\n")
+    anim_before, anim_after = before, after
+    if n_frames is not None and before.n_frames > n_frames:
+        anim_before, anim_after = before.crop(0, n_frames), after.crop(0, n_frames)
+    anim_flags = [f for f in flagged if f < anim_before.n_frames]
+    animations = viz.animate(anim_before, anim_after, flagged=anim_flags, path=out / f"{stem}.gif",
+                             labels=("generated", "refined"), mp4=mp4, **gif)
+    action = stem.split("_", 1)[1].replace("_", " ")
+    viz.keyframe_strip([before, after], flagged=flagged, path=out / f"{stem}_keyframes.png",
+                       labels=("generated", "refined"), n_keyframes=6 if n_frames else 8,
+                       title=f"{action}: key frames, generated (top) and refined (bottom)")
+    # Name each plotted threshold by its quantity: the report's own `threshold` is, for the concepts
+    # method, a pose-score threshold (report.threshold_quantity), not this anchor-probability one.
+    if report.flaw_probability:  # the learned method: per-frame flaw probability and its threshold
+        probability, threshold, label = report.flaw_probability, report.threshold, "flaw probability"
+    else:
+        probability, threshold, label = report.anchor_probability, detect, "anchor probability"
+    probability = np.asarray(probability, dtype=np.float64)
+    if probability.size != before.n_frames:  # clips too short to refine carry no per-frame scores
+        probability = np.zeros(before.n_frames)
+    viz.plot_scores(probability, threshold, anchors=report.anchors, flagged=flagged, path=out / f"{stem}_scores.png",
+                    fps=before.fps, label=label, title=f"{action}: {label} per frame (generated clip)")
+    names = [f"{stem}.gif"] + [p.name for p in animations[1:]]
+    names += [f"{stem}_keyframes.png", f"{stem}_scores.png", f"{stem}_before.npy", f"{stem}_after.npy",
+              f"{stem}_report.json"]
+    return names
+
+
+def _existing_outputs(out: Path, stems: Sequence[str]) -> list[str]:
+    """Names of files in ``out`` that the demo would write (its summary, or any file of an action's stem)."""
+    if not out.is_dir():
+        return []
+    return sorted(p.name for p in out.iterdir()
+                  if p.name in ("summary.md", "summary.json") or any(p.name.startswith(s + ".") or
+                                                                     p.name.startswith(s + "_") for s in stems))
+
+
+def _softmax(logits: np.ndarray) -> np.ndarray:
+    z = logits - logits.max(1, keepdims=True)
+    e = np.exp(z)
+    return e / e.sum(1, keepdims=True)

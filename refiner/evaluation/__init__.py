@@ -1,0 +1,1 @@
+"""Evaluation: pretrained recognisers, distribution and physical metrics, seeded flaws, baselines, bench suites."""

@@ -1,0 +1,156 @@
+"""``motion-refiner bench flaws``: refiners against the seven seeded flaw families on held-out subjects.
+
+Every held-out clip (subjects 11-12) is corrupted by each family of :mod:`refiner.evaluation.flaws` (seed =
+clip index) and refined with its true action. The headline is the share of the flaw's added MPJPE
+that a refiner removes, ``100 * (1 - MPJPE(refined) / MPJPE(flawed))`` against the clean clip,
+per family, with the families whose mechanism training never used
+(:data:`refiner.refinement.training_flaws.HELD_OUT_FAMILIES`) reported apart. The *oracle* rows isolate the
+repair step: they are given the true flaw mask and replace exactly those frames, by linear
+interpolation, by the repair network in-filling them (frames hidden), or by the repair network
+seeing them (frames given).
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from refiner.evaluation.bench import _humanact12_and_recognizer, markdown_table, one_thread, write_record
+
+__all__ = ["bench_flaws", "flaw_records", "ORACLES"]
+
+ORACLES = ("oracle_linear", "oracle_infill", "oracle_given")
+
+
+def _oracle(name: str, model, flawed: np.ndarray, mask: np.ndarray, action: int) -> np.ndarray:
+    from refiner.core.signal import linear_infill
+
+    if not mask.any():
+        return flawed
+    if name == "oracle_linear":
+        proposal = linear_infill(flawed, mask)
+    else:
+        proposal = model.flaw_repairer.repair(flawed[None], mask[None], [action], hide=name == "oracle_infill")[0]
+    out = flawed.copy()
+    out[mask] = proposal[mask]
+    return out
+
+
+def flaw_records(clips, refiners: dict, *, severities=(2,), model=None, families=None) -> tuple[list, list]:
+    """Refine every clip corrupted by every family; returns ``(clean_rows, records)``.
+
+    ``refiners``: name -> object with ``refine(motion, *, action) -> Motion``. With ``model`` (a
+    :class:`~refiner.refinement.pipeline.Refiner` with learned parts) the :data:`ORACLES` rows are added.
+    ``clean_rows``: ``[name, MPJPE change cm, share of clips changed]``; each record: family,
+    severity, refiner, ``mpjpe_cm`` (all frames), ``mpjpe_flawed_cm`` (true flaw frames),
+    ``removed_pct``.
+    """
+    from refiner.concepts.segmentation import segment
+    from refiner.evaluation.flaws import FLAW_FAMILIES, corrupt
+
+    segs = [segment(m.joints) for m in clips]
+    donors = [[d for j, d in enumerate(clips) if j != i and d.action == m.action] for i, m in enumerate(clips)]
+    clean_rows = []
+    for name, r in refiners.items():
+        outs = [r.refine(m, action=m.action) for m in clips]
+        err = [np.linalg.norm(o.joints.astype(np.float64) - m.joints, axis=-1).mean() for o, m in zip(outs, clips)]
+        clean_rows.append([name, 100 * float(np.mean(err)), float(np.mean(np.array(err) > 0))])
+    records = []
+    for family in families or FLAW_FAMILIES:
+        for severity in severities:
+            flawed = [corrupt(m, family, severity, random_state=i, segmentation=segs[i], donors=donors[i])
+                      for i, m in enumerate(clips)]
+            base = None
+            names = list(refiners) + (list(ORACLES) if model is not None else [])
+            for name in names:
+                if name in ORACLES:
+                    outs = [_oracle(name, model, c.motion.numpy(), c.mask, m.action) for c, m in zip(flawed, clips)]
+                else:
+                    outs = [refiners[name].refine(c.motion, action=m.action).numpy() for c, m in zip(flawed, clips)]
+                err = [np.linalg.norm(o.astype(np.float64) - m.joints, axis=-1).mean(-1) for o, m in zip(outs, clips)]
+                all_cm = 100 * float(np.mean([e.mean() for e in err]))
+                masked = [e[c.mask].mean() for e, c in zip(err, flawed) if c.mask.any()]
+                if base is None:  # the first refiner is identity: the flaw's added error
+                    base = all_cm
+                records.append({"family": family, "severity": severity, "refiner": name, "mpjpe_cm": all_cm,
+                                "mpjpe_flawed_cm": 100 * float(np.mean(masked)),
+                                "removed_pct": 100 * (1 - all_cm / base) if base > 0 else 0.0})
+    return clean_rows, records
+
+
+@one_thread()
+def bench_flaws(data: Path | None, out: Path | None, quick: bool, *, stride: int = 1,
+                severities: tuple[int, ...] | None = None) -> str:
+    """Seeded flaws on held-out HumanAct12 clips; see the module docstring. ``stride`` keeps every
+    stride-th clip; ``severities`` default (2,) (the acceptance severity), ``quick`` every 68th clip (4).
+    Runs on one thread (:func:`~refiner.evaluation.bench.one_thread`).
+
+    With ``out`` writes ``flaws.json``: the clips, severities and families, the refiners ``skipped``
+    (name -> why), ``clean`` (name -> MPJPE change cm, share of clips changed), ``flawed`` (the
+    :func:`flaw_records`) and ``summary`` (severity -> name -> mean % removed over the training
+    families, the held-out ones and all).
+    """
+    from refiner.evaluation.baselines import FLAW_REFINERS
+    from refiner.evaluation.flaws import FLAW_FAMILIES
+    from refiner.refinement.pipeline import Refiner
+    from refiner.refinement.training_flaws import HELD_OUT_FAMILIES
+
+    dataset, _ = _humanact12_and_recognizer(data, hidden="fixed")
+    test = dataset.split("test")
+    step = 68 if quick else max(int(stride), 1)
+    clips = test.subset(range(0, len(test), step)).motions
+    severities = tuple(severities) if severities else (2,)
+    skipped, refiners = {}, {}
+    for name, factory in FLAW_REFINERS.items():
+        try:
+            refiners[name] = factory()
+        except Exception as e:  # an optional refiner that cannot be built is skipped, not fatal
+            skipped[name] = f"{type(e).__name__}: {e}"
+    notes = [f"- `{name}` skipped: {why}" for name, why in skipped.items()]
+    try:
+        model = Refiner.pretrained("humanact12", split="train")
+        model = model if model.flaw_repairer is not None else None
+    except ValueError:
+        model = None
+    t0 = time.perf_counter()
+    clean_rows, records = flaw_records(clips, refiners, severities=severities, model=model)
+    seconds = time.perf_counter() - t0
+
+    names = list(dict.fromkeys(r["refiner"] for r in records))
+    table = {(r["family"], r["severity"], r["refiner"]): r for r in records}
+    rec = {"clips": len(clips), "severities": list(severities), "families": list(FLAW_FAMILIES),
+           "held_out_families": list(HELD_OUT_FAMILIES), "skipped": skipped,
+           "clean": {row[0]: {"mpjpe_change_cm": row[1], "share_changed": row[2]} for row in clean_rows},
+           "flawed": records, "summary": {}, "seconds": seconds}
+    for severity in severities:
+        removed = {name: {f: table[(f, severity, name)]["removed_pct"] for f in FLAW_FAMILIES} for name in names}
+        rec["summary"][str(severity)] = {name: {
+            "training_mean_removed_pct": float(np.mean([v for f, v in r.items() if f not in HELD_OUT_FAMILIES])),
+            "held_out_mean_removed_pct": float(np.mean([v for f, v in r.items() if f in HELD_OUT_FAMILIES])),
+            "mean_removed_pct": float(np.mean(list(r.values())))} for name, r in removed.items()}
+    lines = [f"## Flaws (HumanAct12 subjects 11-12, {len(clips)} clips, severities {list(severities)})", "",
+             "Share of the flaw's added MPJPE removed (%, all frames, against the clean clip; negative = worse "
+             "than leaving the flaw). Held-out families (mechanism never used in training): "
+             + ", ".join(f"`{f}`" for f in HELD_OUT_FAMILIES) + ". Oracle rows get the true flaw mask.", ""]
+    lines += notes + ([""] if notes else [])
+    for severity in severities:
+        summary = rec["summary"][str(severity)]
+        rows = [[name] + [float(table[(f, severity, name)]["removed_pct"]) for f in FLAW_FAMILIES]
+                + [summary[name][k] for k in ("training_mean_removed_pct", "held_out_mean_removed_pct",
+                                              "mean_removed_pct")] for name in names]
+        header = ["refiner"] + [f + (" (held out)" if f in HELD_OUT_FAMILIES else "") for f in FLAW_FAMILIES]
+        lines += [f"### Severity {severity}: % of added MPJPE removed", "",
+                  markdown_table(header + ["mean, training families", "mean, held-out", "mean, all 7"], rows), ""]
+        mrows = [[name] + [float(table[(f, severity, name)]["mpjpe_cm"]) for f in FLAW_FAMILIES] for name in names]
+        lines += [f"### Severity {severity}: MPJPE (cm, all frames; `identity` = the flaw)", "",
+                  markdown_table(["refiner"] + list(FLAW_FAMILIES), mrows), ""]
+        frows = [[name] + [float(table[(f, severity, name)]["mpjpe_flawed_cm"]) for f in FLAW_FAMILIES]
+                 for name in names]
+        lines += [f"### Severity {severity}: MPJPE on the flawed frames only (cm)", "",
+                  markdown_table(["refiner"] + list(FLAW_FAMILIES), frows), ""]
+    lines += ["### Clean held-out clips (do no harm)", "",
+              markdown_table(["refiner", "MPJPE change cm", "share of clips changed"], clean_rows), "",
+              f"{seconds:.0f} s wall."]
+    write_record(out, "flaws", rec)
+    return "\n".join(lines)

@@ -1,0 +1,187 @@
+"""``motion-refiner bench refiner`` and ``bench speed``: the shipped refiner's figures on held-out clips.
+
+Both suites follow :mod:`refiner.evaluation.bench`: they return a Markdown section and, with ``out``, write
+their figures as ``refiner.json`` / ``speed.json`` (the numbers of the printed tables).
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from refiner.evaluation.bench import markdown_table, one_thread, write_record
+
+__all__ = ["bench_refiner", "bench_speed"]
+
+
+def _load_test_split(data: Path | None):
+    from refiner.io.datasets import load_humanact12
+
+    dataset = load_humanact12(None if data is None else Path(data) / "humanact12" / "humanact12_joints.npz")
+    return dataset.split("test")
+
+
+@one_thread()
+def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
+    """Issue-3 figures for the shipped subject-1-10 weights on held-out subjects 11-12.
+
+    (a) how much real clips change, (b) velocity jumps where refined windows meet kept frames
+    against real data's 99th percentile, (c) anchor recognition precision / recall against the
+    segmentation, (d) refine latency per 60-frame clip (CPU, batch 1), parameter counts, and the
+    anchor-quality comparison behind the ``quality`` default (pose mixture vs the paper's
+    encoder-feature GMM, ROC AUC on seeded anchor flaws). Runs on one thread (:func:`~refiner.evaluation.bench.one_thread`),
+    as ``refine`` itself does.
+    """
+    import torch
+    from sklearn.metrics import roc_auc_score
+
+    from refiner.concepts.segmentation import segment
+    from refiner.evaluation.flaws import corrupt
+    from refiner.evaluation.physics import boundary_velocity_jump
+    from refiner.refinement.pipeline import Refiner
+    from refiner.refinement.recognition import match_anchors
+
+    test = _load_test_split(data)
+    clips = test.motions[:: (16 if quick else 1)]
+    model = Refiner.pretrained("humanact12", split="train")
+    counts = model.n_parameters()
+    rec = {"clips": len(clips), "parameters": counts}
+    lines = [f"## Refiner (shipped subject-1-10 weights, {len(clips)} held-out clips of subjects 11-12)", "",
+             "Parameters: " + ", ".join(f"{k} {v:,}" for k, v in counts.items()) + " (paper: 6.23 M)."]
+
+    segs = [segment(m.joints) for m in clips]
+    change, frames, n_changed, tp, n_pred, n_ref = 0.0, 0, 0, 0, 0, 0
+    jumps = []
+    for m, seg in zip(clips, segs):
+        refined, report = model.refine(m, return_report=True)
+        err = np.linalg.norm(refined.joints - m.joints, axis=-1).mean(-1)
+        change, frames = change + err.sum(), frames + m.n_frames
+        n_changed += bool(report.changes)
+        counts_ = match_anchors(report.anchors, seg.anchors)
+        tp, n_pred, n_ref = tp + counts_[0], n_pred + counts_[1], n_ref + counts_[2]
+    real_acc = np.concatenate([np.linalg.norm(np.diff(m.joints, 2, axis=0), axis=-1).max(-1) * m.fps ** 2
+                               for m in clips])
+    # window boundaries need changes: refine clips with seeded anchor flaws and measure every splice
+    for i, (m, seg) in enumerate(zip(clips, segs)):
+        bad = corrupt(m, "anchor_drift", 3, random_state=i, segmentation=seg).motion
+        refined, report = model.refine(bad, return_report=True)
+        mask = report.changed_frames
+        if mask.any() and not mask.all():
+            jumps.append(boundary_velocity_jump(refined, mask).jump * m.fps)  # m/s per frame -> m/s²
+    p99 = float(np.percentile(real_acc, 99))
+    rec.update({
+        "real_mpjpe_change_cm": float(100 * change / frames), "real_clips_changed": n_changed,
+        "boundary_acceleration": {
+            "boundaries": len(jumps), "real_p99": p99, "max": float(max(jumps)) if jumps else None,
+            "median": float(np.median(jumps)) if jumps else None,
+            "above_real_p99": int(np.sum(np.array(jumps) > p99))},
+        "anchor_precision": float(tp / max(n_pred, 1)), "anchor_recall": float(tp / max(n_ref, 1)),
+    })
+    b = rec["boundary_acceleration"]
+    lines += ["", markdown_table(["figure", "value", "target"], [
+        ["(a) real clips: MPJPE change (cm)", rec["real_mpjpe_change_cm"], "< 0.3"],
+        ["(a) real clips changed at all", f"{n_changed} / {len(clips)}", ""],
+        ["(b) largest boundary acceleration (m/s²), refined drifted clips",
+         "no boundary" if b["max"] is None else b["max"], f"real p99 {p99:.1f}"],
+        ["(b) median boundary acceleration (m/s²)", "-" if b["median"] is None else b["median"], ""],
+        ["(b) boundaries above real p99", f"{b['above_real_p99']} / {len(jumps)}", ""],
+        ["(c) anchor recognition precision (±2 frames)", rec["anchor_precision"], ""],
+        ["(c) anchor recognition recall (±2 frames)", rec["anchor_recall"], ""],
+    ])]
+    print(lines[-1], flush=True)
+
+    window = [m.joints[:60] for m in clips if m.n_frames >= 60][: (5 if quick else 50)]
+    for x in window[:3]:
+        model.refine(x)  # warm up
+    times = []
+    for x in window:
+        t0 = time.perf_counter()
+        model.refine(x)
+        times.append(time.perf_counter() - t0)
+    rec["latency"] = {"clips": len(times), "threads": model.threads_for(window[0]) or torch.get_num_threads(),
+                      "median_ms": float(1000 * np.median(times)), "p90_ms": float(1000 * np.percentile(times, 90))}
+    lat = rec["latency"]
+    lines += ["", f"(d) refine latency per 60-frame clip, CPU batch 1 ({lat['threads']} threads, "
+                  f"{lat['clips']} clips): median **{lat['median_ms']:.1f} ms**, "
+                  f"90th percentile {lat['p90_ms']:.1f} ms (paper: 17 ms on a GPU)."]
+    print(lines[-1], flush=True)
+
+    rec["anchor_quality_auc"] = {}
+    rng = np.random.default_rng(0)
+    for family in ("anchor_drift", "wrong_anchor"):
+        labels, pose_s, enc_s = [], [], []
+        for i, (m, seg) in enumerate(zip(clips, segs)):
+            a = seg.anchors
+            if len(a) < 3:
+                continue
+            donors = [d for d in test.motions if d.action == m.action and d is not m][:5]
+            bad = corrupt(m, family, 2, random_state=i, donors=donors, segmentation=seg).motion
+            shift = np.linalg.norm(bad.joints - m.joints, axis=-1).mean(-1)[a]
+            k_bad = int(np.argmax(shift[1:-1])) + 1
+            k_real = int(rng.integers(1, len(a) - 1))
+            for clip, k, label in ((m.joints, k_real, 0), (bad.joints, k_bad, 1)):
+                labels.append(label)
+                pose_s.append(-model.anchor_quality.score(clip[a[k]][None], m.action)[0])
+                enc_s.append(-model.recognizer.recognize(clip, anchors=a).scores[k])
+        rec["anchor_quality_auc"][family] = {"pairs": len(labels) // 2, "pose": float(roc_auc_score(labels, pose_s)),
+                                             "encoder": float(roc_auc_score(labels, enc_s))}
+    rows = [[family, v["pose"], v["encoder"]] for family, v in rec["anchor_quality_auc"].items()]
+    lines += ["", "Anchor quality scores, ROC AUC separating a seeded flawed anchor (severity 2) from a real one:", "",
+              markdown_table(["flaw", "pose mixture (default)", "encoder-feature GMM (paper)"], rows)]
+    write_record(out, "refiner", rec)
+    return "\n".join(lines)
+
+
+def bench_speed(data: Path | None, out: Path | None, quick: bool) -> str:
+    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters, CPU and CUDA."""
+    import resource
+
+    import torch
+
+    from refiner.refinement.pipeline import Refiner
+
+    clips = [m.joints[:60] for m in _load_test_split(data) if m.n_frames >= 60][: (8 if quick else 64)]
+    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    batch_size = 8 if quick else 256
+    rec = {"clips": len(clips), "batch": batch_size, "devices": []}
+    for device in devices:
+        model = Refiner.load(Path(__file__).resolve().parents[1] / "weights" / "humanact12-train", device=device)
+        for x in clips[:3]:
+            model.refine(x)  # warm up (first calls allocate and compile kernels)
+        times = []
+        for x in clips:
+            t0 = time.perf_counter()
+            model.refine(x)
+            if device == "cuda":
+                torch.cuda.synchronize()
+            times.append(time.perf_counter() - t0)
+        batch = np.stack([clips[i % len(clips)] for i in range(batch_size)])
+        model.refine(batch[:8])
+        runs = []
+        for _ in range(1 if quick else 3):  # the median of three calls: one call is at the mercy of the machine
+            t0 = time.perf_counter()
+            model.refine(batch)
+            runs.append(time.perf_counter() - t0)
+        rec["devices"].append({
+            "device": device,
+            "name": (f"{model.threads_for(clips[0]) or torch.get_num_threads()} / "
+                     f"{model.threads_for(batch) or torch.get_num_threads()} threads (batch 1 / {batch_size})")
+            if device == "cpu" else torch.cuda.get_device_name(),
+            "median_ms": float(1000 * np.median(times)), "p90_ms": float(1000 * np.percentile(times, 90)),
+            "clips_per_s": len(batch) / float(np.median(runs)),
+            "peak_mib": float(torch.cuda.max_memory_allocated() / 2**20 if device == "cuda"
+                              else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
+            "peak_of": "CUDA" if device == "cuda" else "process RSS"})
+        print(f"  {device}: median {rec['devices'][-1]['median_ms']:.1f} ms per 60-frame clip", flush=True)
+    rec["parameters"] = Refiner.pretrained("humanact12", split="train").n_parameters()
+    rows = [[d["device"], d["name"], d["median_ms"], d["p90_ms"], d["clips_per_s"],
+             f"{d['peak_mib']:.0f} MiB ({d['peak_of']})"] for d in rec["devices"]]
+    write_record(out, "speed", rec)
+    return "\n".join([
+        f"## Speed ({len(clips)} held-out 60-frame clips; paper: 0.017 s per clip, 6.23 M parameters)", "",
+        markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", f"clips / s (batch of {batch_size})",
+                        "peak memory"], rows),
+        "", "Parameters: " + ", ".join(f"{k} {v:,}" for k, v in rec["parameters"].items()) + ".",
+        "" if "cuda" in devices else "No CUDA device here; run the same command on a GPU machine for the GPU rows.",
+    ])

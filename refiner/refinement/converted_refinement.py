@@ -1,0 +1,144 @@
+"""Refinement of a skeleton without weights of its own, through another skeleton's refiner.
+
+A clip on skeleton S (e.g. the 18-joint ``uestc`` layout) is converted to the refiner's skeleton R
+(the 24 HumanAct12 joints) by :func:`refiner.core.skeletons.convert`, refined there, and only the
+*change* comes back: ``out = x + convert(refined_R, R, S) - convert(x_R, R, S)`` on the frames the
+refiner changed, so the frames it left alone are returned exactly as given, and the joints that the
+conversion has to estimate (on ``uestc``: the nose, heels and head top from SMPL joints; on the way
+in, spine, collars, feet, hands and head from the 18) affect the result only through the change.
+The action is unknown unless given as one of HumanAct12's action names (``uestc``'s 40 labels are not
+HumanAct12's 12): the recognition network's "unknown" entry handles it, and the flaw classifier is
+action-agnostic.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from refiner.core.motion import Motion
+from refiner.core.output_kind import like_input
+from refiner.core.skeleton_conversion import convert, estimated_joints
+from refiner.core.skeletons import get_skeleton, rigid_skeleton
+from refiner.core.validation import check_joints
+
+__all__ = ["ConvertedRefiner", "FLEXIBLE_BONES"]
+
+#: "Bones" of a layout that span a bending chain, so real motion changes their length: left out of
+#: the rigid-skeleton step. Measured on HumanAct12 subjects 1-10 (every 10th clip) converted to each
+#: layout, median coefficient of variation (all other bones: 0.00 %).
+FLEXIBLE_BONES = {
+    "uestc": (("mid_hip", "neck"), ("neck", "right_shoulder"), ("neck", "left_shoulder"), ("neck", "nose")),  # 0.5-3.3 %
+    "cmu_mocap": (("pelvis", "spine"), ("spine", "left_shoulder"), ("spine", "right_shoulder")),  # 0.7-2.2 %
+}
+
+
+class ConvertedRefiner:
+    """Refine clips of ``skeleton`` with ``base`` (a :class:`~refiner.refinement.pipeline.Refiner` of another skeleton).
+
+    Parameters
+    ----------
+    base : Refiner
+    skeleton : str
+        A registered skeleton that :func:`refiner.core.skeletons.convert` connects with ``base.skeleton``.
+    rigid_tolerance : float, default=0.005
+        The rigid-skeleton step runs here, on ``skeleton``'s own bones (a clip whose bones vary more
+        than this is put on its median lengths); ``base`` should not repeat it
+        (``rigid_tolerance=inf``), since the joints the conversion estimates do not keep their lengths.
+
+    Attributes
+    ----------
+    base, skeleton, action_names : as given / ``base``'s
+    estimated : tuple of str
+        The joints of ``skeleton`` that the way back estimates (see the module docstring).
+    rigid_bones : ndarray of bool
+        The bones the rigid-skeleton step judges and enforces (all but :data:`FLEXIBLE_BONES`).
+    """
+
+    def __init__(self, base, skeleton: str, *, rigid_tolerance: float = 0.005):
+        self.base = base
+        if isinstance(rigid_tolerance, bool) or not isinstance(rigid_tolerance, (int, float)) or rigid_tolerance < 0:
+            raise ValueError(f"`rigid_tolerance` must be a number >= 0; got {rigid_tolerance!r}.")
+        self.rigid_tolerance = float(rigid_tolerance)
+        self.skeleton = get_skeleton(skeleton).name
+        self.action_names = base.action_names
+        self.estimated = estimated_joints(base.skeleton, self.skeleton)
+        skel = get_skeleton(self.skeleton)
+        flexible = {frozenset(pair) for pair in FLEXIBLE_BONES.get(self.skeleton, ())}
+        self.rigid_bones = np.array([frozenset((skel.joint_names[a], skel.joint_names[b])) not in flexible
+                                     for a, b in skel.bones])
+        estimated_joints(self.skeleton, base.skeleton)  # refuses skeletons the conversion cannot reach
+
+    def __repr__(self) -> str:
+        return f"ConvertedRefiner({self.skeleton!r} through {self.base.skeleton!r})"
+
+    @property
+    def threads(self):
+        """``base``'s thread setting, which :meth:`refine` runs under (see :class:`~refiner.refinement.pipeline.Refiner`)."""
+        return self.base.threads
+
+    def threads_for(self, seq) -> int | None:
+        """The torch / BLAS threads :meth:`refine` uses for ``seq``."""
+        return self.base.threads_for(seq)
+
+    def refine(self, seq, *, action=None, mode: str | None = None, return_report: bool = False):
+        """Refine one clip or a batch of ``skeleton``; returns the same kind as given (see :func:`refiner.refine`).
+
+        ``action``: a name among ``base``'s actions (HumanAct12's) is used; any other action (an index
+        or name of this skeleton's own dataset, e.g. UESTC's 40 labels or NTU13's 13) or None refines
+        action-agnostic, and the report says so. A :class:`~refiner.core.motion.Motion`'s own action is
+        such a label too.
+        """
+        from refiner.refinement.pipeline import thread_limits
+
+        with thread_limits(self.threads_for(seq)):
+            return self._refine(seq, action, mode, return_report)
+
+    def _refine(self, seq, action, mode, return_report):
+        from refiner.refinement.pipeline import MIN_FRAMES, check_metres_each
+
+        if isinstance(seq, Motion):
+            if seq.skeleton != self.skeleton:
+                raise ValueError(f"this refiner is for skeleton {self.skeleton!r}; got a {seq.skeleton!r} motion.")
+            out, report = self._refine(seq.joints, seq.action if action is None else action, mode, True)
+            result = seq.with_joints(out)
+            return (result, report) if return_report else result
+        batched = len(getattr(seq, "shape", np.shape(seq))) == 4
+        x = check_joints(seq, skeleton=self.skeleton, batched=batched)
+        clips = x if batched else x[None]
+        check_metres_each(clips, get_skeleton(self.skeleton), batched)
+        actions = list(action) if batched and isinstance(action, (list, tuple, np.ndarray)) else [action] * len(clips)
+        if len(actions) != len(clips):
+            raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
+        known = [a if isinstance(a, str) and a in self.action_names else None for a in actions]
+        long_enough = clips.shape[1] >= MIN_FRAMES  # shorter clips come back exactly as given
+        rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
+                 else (c, 0.0) for c in clips]
+        given = np.stack([r[0] for r in rigid]).astype(np.float32)
+        # the joints the conversion estimates do not keep their lengths, and the flaw classifier reads
+        # bone-length changes as flaws (it flagged every frame of converted clean clips): make them rigid
+        inner = np.stack([rigid_skeleton(c, self.base.skeleton, self.rigid_tolerance)[0]
+                          for c in convert(given, self.skeleton, self.base.skeleton)]).astype(np.float32)
+        if batched:
+            refined, reports = self.base.refine(inner, action=known, mode=mode, return_report=True)
+        else:
+            one, report = self.base.refine(inner[0], action=known[0], mode=mode, return_report=True)
+            refined, reports = one[None], [report]
+        changed = ~(refined == inner).reshape(*refined.shape[:2], -1).all(-1)  # (B, T)
+        delta = convert(refined, self.base.skeleton, self.skeleton) - convert(inner, self.base.skeleton, self.skeleton)
+        out = given.copy()
+        out[changed] = (given[changed] + delta[changed]).astype(np.float32)
+        note = (f"refined as {self.base.skeleton!r} through refiner.core.skeletons.convert; only the change came back"
+                + (f" (estimated on the way back: {', '.join(self.estimated)})" if self.estimated else ""))
+        for report, (_, variation), asked, used in zip(reports, rigid, actions, known):
+            report.notes.append(note)
+            if asked is not None and used is None:
+                report.notes.append(f"action {asked!r} is not one of the refiner's actions; refined action-agnostic")
+            if variation > self.rigid_tolerance:
+                report.changes.insert(0, {"start": 0, "stop": x.shape[-3], "step": "skeleton", "reason":
+                                          f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
+                                          f"0 %); every frame put back on the clip's median {self.skeleton} bone lengths "
+                                          "(bones that span a bending chain left free)"})
+        out = out if batched else out[0]
+        result = like_input(out, seq, x)
+        if return_report:
+            return result, (reports if batched else reports[0])
+        return result

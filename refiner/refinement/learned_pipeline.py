@@ -1,0 +1,305 @@
+"""Refinement with the learned steps (``method="learned"``, the default): recognise, repair, splice, make rigid.
+
+0. **Rigid skeleton**, first: where a clip's bones vary in length more than mocap's
+   (``rigid_tolerance``, coefficient of variation; real HumanAct12 clips: under 0.001 %), every frame
+   is put back on the clip's median bone lengths, so the detectors judge the motion, not the bones.
+1. **Recognition**: per-frame flaw probability from the kinematic flaw classifier
+   (:class:`~refiner.refinement.flaw_classifier.FlawClassifier`, the default detector), anchor probability and
+   the action from the recognition network (:class:`~refiner.refinement.learned_refinement.FlawRecognizer`,
+   whose own flaw probability and the repair network's whole-clip correction are optional extra
+   detectors, ``detect``), each for the whole batch in one forward pass. Frames where a detector
+   stays above its threshold (each calibrated on held-out subjects' real clips) for ``min_run``
+   frames are flagged, widened by ``margin`` frames of context on each side.
+2. **Anchor and transition refinement**: each flagged run gets the repair for the flaw group the
+   classifier recognises in it (``repair="typed"``, :data:`TYPED_REPAIRS`): timing flaws are re-timed
+   along their own path where they stall (:mod:`refiner.refinement.repair_candidates`), a body that glides or
+   floats is corrected by the repair network (:class:`~refiner.refinement.learned_refinement.FlawRepairer`,
+   one forward pass for the batch) and moved back over its planted feet
+   (:mod:`refiner.core.contact`), noise is smoothed; all but the re-timing are kept only when the
+   flaw classifier finds the result more real (:data:`VERIFY_TYPED`). Only the flagged runs are
+   spliced in (displacement zero at the kept frames, smoothstep taper), and changed frames go back
+   on the input's bone lengths. A run that contains a recognised anchor is reported as an anchor
+   refinement, the others as transition refinements.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from refiner.core.skeletons import get_skeleton, rigid_skeleton
+from refiner.refinement.recognition import _peaks
+from refiner.refinement.repair_candidates import CANDIDATES
+from refiner.refinement.training_flaws import GROUPS
+
+__all__ = ["flag_runs", "refine_batch", "check_detect", "REPAIRS", "DETECTORS"]
+
+#: ``repair="typed"``: per flagged run, the repair for the flaw group the classifier recognises
+#: (:data:`TYPED_REPAIRS`); ``"select"``: per flagged run, the candidate (the repair network's two proposals, the
+#: hand-written repairs of :mod:`refiner.refinement.repair_candidates`, or no change) that the flaw classifier
+#: finds most real; ``"given"``: the network sees the flagged frames (denoises small flaws, replaces
+#: large ones); ``"infill"``: they are hidden and in-filled from the context alone.
+REPAIRS = ("typed", "select", "given", "infill")
+_GROUP_NAMES = tuple(GROUPS)
+#: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many
+#: frames its window is widened on each side; ``"a+b"`` applies ``a``, then ``b`` to its result (a
+#: network proposal, which is computed for the whole batch beforehand, can only come first).
+#: Chosen by measurement (``examples/measure_typed_repairs.py``, which takes each variant below as
+#: JSON) on the calibration subjects 9-10 of the train split (every 2nd clip, the
+#: benchmark's five training families at severity 2 and clean clips; the two held-out families were
+#: printed but not used to choose), share of the flaws' MPJPE removed, mean of the 7 families:
+#:
+#: - previous table (timing: retime, root and pose: network, noise: smooth widened by 4), classifier
+#:   trained on raw flawed crops: +6.0 % (wrong_anchor -1.1, anchor_drift -1.3, jitter +13.0,
+#:   frozen +28.2, time_warp -8.6); clean clips 0.020 cm, 4.7 % touched;
+#: - classifier trained on rigid-projected crops (as it sees them here): detection of jitter rose
+#:   from 4 to 31 of 85 clips, of wrong anchors from 16 to 48; with the planted-feet repair after the
+#:   network: +9.2 %, but wrong_anchor -12.0 % (the network moved wrong poses further away);
+#: - pose -> planted feet only, root -> network then planted feet: wrong_anchor still -14.3 % (a
+#:   wrong walking pose makes the feet skate too); both *verified* (:data:`VERIFY_TYPED`): +12.6 %,
+#:   wrong_anchor -2.1, time_warp -1.5, clean clips untouched;
+#: - timing -> re-time only where the run stalls (``stall_retime``): time_warp -0.1 %, frozen +42.2 %;
+#: - noise -> Gaussian smoothing sigma 1 frame, not widened: unverified it removed +23.6 % of jitter
+#:   (the smoothing spline: +24.4 %, twice the time), but on the a2m reference generator's samples
+#:   it smoothed 72 % of the frames and FID rose 4.343 -> 4.498 (accuracy 42.3 -> 41.6 %): the
+#:   classifier's "noise" there is motion the recogniser expects. Verified, as the other groups:
+#:   jitter +17.7 % (the rigid-skeleton step), a2m untouched; **+12.5 %** in all (wrong_anchor -1.8,
+#:   anchor_drift -0.9, jitter +17.7, frozen +42.2, time_warp -0.1; clean clips untouched);
+#: - the stall re-timing's window widened by 2 / 4 / 6 / 8 / 12 frames each side (a stall starts at
+#:   the anchor, before the detector is sure): frozen +45.9 / **+49.5** / +41.2 / +36.2 / +26.4 %,
+#:   time_warp -0.1 % throughout: **+13.5 %** in all.
+TYPED_REPAIRS = {"timing": ("stall_retime", 4), "root": ("network+planted_feet", 0), "pose": ("planted_feet", 0),
+                 "noise": ("smooth", 0)}
+#: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
+#: the given frames (:func:`_select` with the one candidate): a body moved back over skating feet or
+#: a network correction is right for gliding and floating bodies and wrong for a wrong pose, which
+#: skates too; smoothing unverified made a real generator's samples less real (FID +3.6 %).
+#: Re-timing stays unverified: the classifier rejected most re-timed stalls, which remove 42 % there.
+VERIFY_TYPED = ("root", "pose", "noise")
+#: Detectors that can flag frames (``detect="classifier+recognizer"`` takes the union): the kinematic
+#: flaw classifier, the recognition network's flaw probability, the repair network's correction of
+#: the whole clip (how far it would move each frame).
+DETECTORS = ("classifier", "recognizer", "correction")
+
+
+def check_detect(detect: str) -> str:
+    """Validate a ``"+"``-joined list of :data:`DETECTORS`."""
+    names = str(detect).split("+")
+    if not detect or any(n not in DETECTORS for n in names):
+        raise ValueError(f"unknown detect {detect!r}; use one or more of {', '.join(DETECTORS)} joined by '+'.")
+    return detect
+
+
+_ANCHOR_THRESHOLD = 0.3
+#: Frames on each side of a run that the selection's flaw score also covers (the seams).
+_SCORE_CONTEXT = 4
+#: Frames by which the hand-written repairs' window is also widened on each side.
+_WIDEN = (0, 4, 8)
+
+
+def flag_runs(prob: np.ndarray, threshold: float, *, min_run: int = 2, margin: int = 2,
+              low: float | None = None) -> list[tuple[int, int]]:
+    """Runs ``[start, stop)`` of at least ``min_run`` frames with ``prob (T,)`` above ``threshold``,
+    extended on both sides while ``prob`` stays above ``low`` (hysteresis; default ``threshold``),
+    widened by ``margin`` frames each side and merged where they touch."""
+    low = threshold if low is None else min(low, threshold)
+    above = np.r_[False, prob > threshold, False]
+    edges = np.flatnonzero(np.diff(above.astype(np.int8)))
+    runs = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_run]
+    out: list[list[int]] = []
+    for a, b in runs:
+        while a > 0 and prob[a - 1] > low:
+            a -= 1
+        while b < len(prob) and prob[b] > low:
+            b += 1
+        a, b = max(a - margin, 0), min(b + margin, len(prob))
+        if out and a <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append([a, b])
+    return [(a, b) for a, b in out]
+
+
+_HOW = {
+    "network": "corrected from the given frames and context by the repair network",
+    "network_infill": "in-filled from the context by the repair network",
+    "retime": "re-timed along its own path with a smooth speed",
+    "stall_retime": "re-timed along its own path with a smooth speed where it stalls",
+    "forward_retime": "replayed forward only along its progress to the next kept pose",
+    "smooth": "smoothed in time",
+    "root_infill": "root path in-filled, poses kept",
+    "spline": "smoothed in time by a smoothing spline fitted to it (smoothness by cross-validation)",
+    "planted_feet": "whole body moved back by the slip of the feet planted on the ground",
+}
+
+
+def _how(name: str) -> str:
+    """What a repair named like ``"network+planted_feet (widened by 4)"`` did, in words."""
+    base = name.split(" (")[0]
+    return ", then ".join(_HOW[part] for part in base.split("+")) + name[len(base):]
+
+
+def _select(refiner, y, spliced: dict, lo: int, hi: int) -> tuple[str, str]:
+    """The candidate the flaw classifier finds most real around ``[lo, hi)``, with a small price per
+    centimetre moved (``refiner.change_penalty``); "keep" (no change) is a candidate too."""
+    names = ["keep", *spliced]
+    clips = np.stack([y, *spliced.values()])
+    prob = refiner.flaw_classifier.predict(clips)
+    w0, w1 = max(lo - _SCORE_CONTEXT, 0), min(hi + _SCORE_CONTEXT, len(y))
+    moved = 100 * np.linalg.norm(clips[:, lo:hi] - y[lo:hi], axis=-1).mean((1, 2))
+    score = prob[:, w0:w1].mean(1) + refiner.change_penalty * moved
+    best = int(np.argmin(score))
+    note = f"; chosen among {len(names)} candidates, flaw probability {prob[0, w0:w1].mean():.2f} -> " \
+           f"{prob[best, w0:w1].mean():.2f}"
+    if best == 0:
+        return "keep", "no candidate looked more real than the given frames; kept"
+    return names[best], note
+
+
+def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
+    """Repair one flagged run; returns ``(repair name, (start, stop), new clip, note)``."""
+    from refiner.refinement.pipeline import _reference_lengths, project_bone_lengths, splice
+
+    def spliced(proposal, a, c):
+        return splice(y, proposal, a, c, blend=refiner.blend, keep_start=a > 0, keep_end=c < len(y))
+
+    if refiner.repair == "typed":
+        share = groups[lo:hi].mean(0)
+        group = _GROUP_NAMES[int(np.argmax(share))]
+        name, widen = TYPED_REPAIRS[group]
+        a, c = max(lo - widen, 0), min(hi + widen, len(y))
+        proposal = y
+        for k, part in enumerate(name.split("+")):  # applied left to right
+            if part in proposals and k > 0:
+                raise ValueError(f"typed repair {name!r}: a network proposal ({part!r}) can only come first.")
+            proposal = proposals[part] if part in proposals else CANDIDATES[part](proposal, a, c, skel)
+        note = f"; looks like a {group} flaw (group probability {share.max():.2f})"
+        name = name + (f" (widened by {widen})" if widen else "")
+        new = spliced(proposal, a, c)
+        if group in VERIFY_TYPED:
+            chosen, why = _select(refiner, y, {name: new}, a, c)
+            if chosen == "keep":
+                return "keep", (a, c), y, f"the {name} repair did not look more real than the given frames; kept"
+            note += why
+        return name, (a, c), new, note
+    if refiner.repair != "select":
+        name = next(iter(proposals))
+        return name, (lo, hi), spliced(proposals[name], lo, hi), ""
+    # the hand-written repairs on the run and on the run widened (a stall or a reversal spans a whole
+    # transition; the detector may see only part of it), scored on the input's bone lengths
+    windows, candidates = {}, {n: spliced(p, lo, hi) for n, p in proposals.items()}
+    for w in _WIDEN:
+        a, c = max(lo - w, 0), min(hi + w, len(y))
+        if (a, c) not in windows.values():
+            windows[f" (widened by {w})" if w else ""] = (a, c)
+    for suffix, (a, c) in windows.items():
+        for name, fn in CANDIDATES.items():
+            candidates[name + suffix] = spliced(fn(y, a, c, skel), a, c)
+    span = (min(a for a, _ in windows.values()), max(c for _, c in windows.values()))
+    touched = np.zeros(len(y), bool)
+    touched[span[0] : span[1]] = True
+    reference = _reference_lengths(original, refiner.skeleton)
+    candidates = {n: project_bone_lengths(c, reference, touched, refiner.skeleton) for n, c in candidates.items()}
+    name, note = _select(refiner, y, candidates, *span)
+    if name == "keep":
+        return name, (lo, hi), y, note
+    window = windows.get(name[len(name.split(" (")[0]):], (lo, hi))
+    return name, window, candidates[name], note
+
+
+def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
+    """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
+    from refiner.refinement.pipeline import _reference_lengths, project_bone_lengths
+
+    clips = clips.copy()
+    for b, report in enumerate(reports):  # first the bones: a stretching skeleton is not a motion flaw
+        rigid, variation = rigid_skeleton(clips[b], refiner.skeleton, refiner.rigid_tolerance)
+        if variation > refiner.rigid_tolerance:
+            clips[b] = rigid
+            report.changes.append({"start": 0, "stop": len(rigid), "step": "skeleton", "reason":
+                                   f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
+                                   "0 %); every frame put back on the clip's median bone lengths"})
+    rec = refiner.flaw_recognizer.predict(clips, actions)
+    threshold = float(refiner.flaw_recognizer.threshold_)
+    use = set(refiner.detect.split("+"))
+    use_rec, use_cor, use_clf = "recognizer" in use, "correction" in use, "classifier" in use
+    clf_all = refiner.flaw_classifier.predict_all(clips) if (use_clf or refiner.repair == "typed") else None
+    if use_clf:
+        clf = clf_all[..., 0]
+        clf_threshold = float(refiner.flaw_classifier.threshold_)
+    if use_cor:
+        correction = refiner.flaw_repairer.correction(clips, actions)
+        cor_threshold = float(refiner.flaw_repairer.correction_threshold_)
+    runs_per_clip, suspect = [], np.zeros(clips.shape[:2], bool)
+    for b, report in enumerate(reports):
+        if report.action is None:
+            report.action, report.action_inferred = int(np.argmax(rec["action"][b])), True
+        report.action_name = refiner.action_names[report.action] if refiner.action_names else None
+        anchors = _peaks(rec["anchor"][b], _ANCHOR_THRESHOLD)
+        report.anchors = anchors.tolist()
+        report.anchor_probability = [round(float(p), 4) for p in rec["anchor"][b]]
+        primary = clf[b] if use_clf else rec["flaw"][b]
+        report.flaw_probability = [round(float(p), 4) for p in primary]
+        report.anchor_scores = [round(float(1 - rec["flaw"][b][a]), 3) for a in anchors]
+        report.threshold = round(clf_threshold if use_clf else threshold, 4)
+        # a frame is flagged by either detector; flag_runs on the max of the two normalised scores
+        score = np.zeros(clips.shape[1])
+        if use_rec:
+            score = np.maximum(score, rec["flaw"][b] / max(threshold, 1e-9))
+        if use_clf:
+            score = np.maximum(score, clf[b] / max(clf_threshold, 1e-9))
+        if use_cor:
+            report.correction_cm = [round(100 * float(c), 3) for c in correction[b]]
+            score = np.maximum(score, correction[b] / max(cor_threshold, 1e-9))
+        runs = flag_runs(score, 1.0, min_run=refiner.min_run, margin=refiner.margin, low=refiner.hysteresis)
+        kinds = []
+        for lo, hi in runs:
+            has_anchor = bool(((anchors >= lo) & (anchors < hi)).any())
+            kinds.append("anchor" if has_anchor else "transition")
+        runs = [(r, k) for r, k in zip(runs, kinds) if mode == "full" or mode == k]
+        runs_per_clip.append(runs)
+        for (lo, hi), _ in runs:
+            suspect[b, lo:hi] = True
+    out = clips.copy()
+    todo = np.flatnonzero(suspect.any(1))
+    if todo.size:
+        acts = [reports[b].action for b in todo]
+        proposals = {}
+        groups = clf_all[..., 1:] if refiner.repair == "typed" else None
+        typed = {p for name, _ in TYPED_REPAIRS.values() for p in name.split("+")} if refiner.repair == "typed" else set()
+        if refiner.repair in ("given", "select") or "network" in typed:
+            proposals["network"] = refiner.flaw_repairer.repair(clips[todo], suspect[todo], acts)
+        if refiner.repair in ("infill", "select") or "network_infill" in typed:
+            proposals["network_infill"] = refiner.flaw_repairer.repair(clips[todo], suspect[todo], acts, hide=True)
+        skel = get_skeleton(refiner.skeleton)
+        for k, b in enumerate(todo):
+            y, changed = clips[b].copy(), np.zeros(len(clips[b]), bool)
+            report = reports[b]
+            for (lo, hi), kind in runs_per_clip[b]:
+                evidence = []
+                if use_clf:
+                    evidence.append(f"kinematic flaw probability up to {float(np.max(clf[b][lo:hi])):.2f} "
+                                    f"(threshold {clf_threshold:.2f})")
+                if use_rec:
+                    evidence.append(f"flaw probability up to {float(np.max(rec['flaw'][b][lo:hi])):.2f} "
+                                    f"(threshold {threshold:.2f})")
+                if use_cor:
+                    evidence.append(f"repair correction up to {100 * float(np.max(correction[b][lo:hi])):.1f} cm "
+                                    f"(threshold {100 * cor_threshold:.1f} cm)")
+                name, (lo, hi), y_new, note = _repair_run(refiner, y, lo, hi, {n: p[k] for n, p in proposals.items()},
+                                                          None if groups is None else groups[b], clips[b], skel)
+                if name == "keep":
+                    report.notes.append(f"frames {lo}-{hi - 1} flagged ({', '.join(evidence)}); {note}")
+                    continue
+                y = y_new
+                changed[lo:hi] = True
+                moved = 100 * float(np.linalg.norm(y[lo:hi] - clips[b][lo:hi], axis=-1).mean())
+                report.changes.append({"start": lo, "stop": hi, "step": kind, "repair": name, "reason":
+                                       f"flagged: {', '.join(evidence)}; {_how(name)} "
+                                       f"(moved {moved:.1f} cm on average){note}"})
+                if kind == "anchor":
+                    inside = [a for a in report.anchors if lo <= a < hi]
+                    report.flagged_anchors.extend(inside)
+                    report.refined_anchors.extend({"frame": a, "method": name} for a in inside)
+                else:
+                    report.flagged_transitions.append([lo, hi])
+            out[b] = project_bone_lengths(y, _reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
+    return out

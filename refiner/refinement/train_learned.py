@@ -1,0 +1,161 @@
+"""Train the learned refinement steps (flaw recognition and repair) on a dataset, resumable, with a progress log.
+
+The clips of the split's two highest-numbered subjects are held out: they select the best weights
+and set the flaw threshold, so the threshold holds for people the networks never saw.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from refiner.concepts.anchors import AnchorConcepts
+from refiner.concepts.segmentation import segment
+from refiner.io.datasets import MotionDataset
+from refiner.refinement.flaw_classifier import FlawClassifier
+from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
+
+__all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "train_learned", "train_learned_refiner", "install_learned",
+           "calibrate_learned", "calibration_split", "CLIP_RATE"]
+
+#: Share of held-out real clips each detector may flag (both together: at most twice this).
+CLIP_RATE = 0.03
+
+log = logging.getLogger(__name__)
+
+#: "default" fits in about 30 minutes per network on one CPU core; "tiny" trains in seconds for tests.
+LEARNED_CONFIGS = {
+    "default": dict(d_model=128, n_layers=3, n_heads=4, ffn_dim=256, n_epochs=40, steps_per_epoch=200, batch_size=64),
+    "tiny": dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16, n_epochs=2, steps_per_epoch=2, batch_size=8),
+}
+#: The flaw classifier's settings (about 2 minutes on one CPU core) and its tiny test version.
+CLASSIFIER_CONFIGS = {"default": dict(), "tiny": dict(hidden=8, n_layers=1, copies=1, n_epochs=2, steps_per_epoch=2,
+                                                       batch_size=8)}
+LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer")
+
+
+def calibration_split(subjects) -> np.ndarray:
+    """Boolean mask of held-out clips: the two highest-numbered subjects (10 % of clips if there are no subjects)."""
+    subjects = np.asarray(subjects)
+    if len(np.unique(subjects)) > 2:
+        return np.isin(subjects, np.unique(subjects)[-2:])
+    held = np.zeros(len(subjects), bool)
+    held[:: 10] = True
+    return held
+
+
+def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all", config: str = "default",
+                  only: str | None = None, device: str = "auto", random_state: int = 0, max_seconds: float | None = None,
+                  anchor_concepts: AnchorConcepts | None = None, progress: bool = False) -> dict:
+    """Train one or both learned parts into ``out/parts/`` (checkpoints there make a rerun resume).
+
+    Returns ``{name: fitted part}`` for the parts trained or found finished.
+    """
+    if only is not None and only not in LEARNED_PARTS:
+        raise ValueError(f"unknown learned part {only!r}; known: {', '.join(LEARNED_PARTS)}.")
+    if config not in LEARNED_CONFIGS:
+        raise ValueError(f"unknown config {config!r}; known: {', '.join(LEARNED_CONFIGS)}.")
+    parts_dir = Path(out) / "parts"
+    parts_dir.mkdir(parents=True, exist_ok=True)
+    names = [n for n in LEARNED_PARTS if only is None or n == only]
+    classes = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer}
+    done = {n: classes[n].load(parts_dir / f"{n}.safetensors") for n in names
+            if (parts_dir / f"{n}.safetensors").is_file()}
+    if len(done) == len(names):
+        return done
+    data = dataset.split(split)
+    skeleton = data.motions[0].skeleton
+    clips = [m.joints for m in data]
+    actions = data.actions
+    anchors = [segment(c).anchors for c in clips]
+    held = calibration_split(data.subjects)
+    fit_idx, cal_idx = np.flatnonzero(~held), np.flatnonzero(held)
+
+    def pick(idx):
+        return [clips[i] for i in idx], actions[idx], [anchors[i] for i in idx]
+
+    n_actions = len(dataset.action_names)
+    common = dict(LEARNED_CONFIGS[config], device=device, random_state=random_state, max_seconds=max_seconds,
+                  verbose=progress)
+    for name in names:
+        if name in done:
+            continue
+        t0 = time.perf_counter()
+        if name == "flaw_classifier":
+            est = FlawClassifier(**CLASSIFIER_CONFIGS[config], device=device, random_state=random_state,
+                                 max_seconds=max_seconds, verbose=progress)
+            est.fit(pick(fit_idx)[0], skeleton=skeleton, validation=pick(cal_idx)[0],
+                    checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
+        elif name == "flaw_recognizer":
+            est = FlawRecognizer(**common)
+            est.fit(*pick(fit_idx), skeleton=skeleton, n_actions=n_actions, validation=pick(cal_idx),
+                    checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
+        else:
+            est = FlawRepairer(**common)
+            if anchor_concepts is None:
+                poses = np.concatenate([clips[i][anchors[i]] for i in fit_idx])
+                acts = np.concatenate([np.full(len(anchors[i]), actions[i]) for i in fit_idx])
+                anchor_concepts = AnchorConcepts(8 if config == "default" else 2, random_state=random_state).fit(
+                    poses, acts, n_actions=n_actions)
+            est.fit(*pick(fit_idx), anchor_concepts, skeleton=skeleton, validation=pick(cal_idx),
+                    checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
+        est.save(parts_dir / f"{name}.safetensors")
+        (parts_dir / f"{name}.json").write_text(json.dumps({
+            "seconds": round(time.perf_counter() - t0, 1), "split": split, "fit_clips": int(len(fit_idx)),
+            "calibration_clips": int(len(cal_idx)), "steps": len(est.history_) * est.steps_per_epoch,
+            "history": est.history_[-3:]}, indent=1))
+        done[name] = est
+    return done
+
+
+def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None = None, info: dict | None = None):
+    """Add the learned parts to the refiner saved in ``folder`` and save it to ``out`` (default: in place).
+
+    The manifest records, under ``learned``, how they were trained (``info``) and the flaw threshold.
+    """
+    from refiner.refinement.pipeline import Refiner
+
+    refiner = Refiner.load(folder, method="concepts")
+    refiner.flaw_classifier = parts["flaw_classifier"]
+    refiner.flaw_recognizer = parts["flaw_recognizer"]
+    refiner.flaw_repairer = parts["flaw_repairer"]
+    refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
+                                   "classifier_threshold": float(parts["flaw_classifier"].threshold_),
+                                   "correction_threshold_m": float(parts["flaw_repairer"].correction_threshold_)}
+    refiner.save(out or folder, half=True)
+    return Refiner.load(out or folder)
+
+
+def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str = "all", base: str | Path | None = None,
+                          only: str | None = None, **kwargs):
+    """Train the learned steps (:func:`train_learned`) and save them with the parts of the refiner in
+    ``base`` (default: the shipped weights of ``split``) to ``out``; None when ``only`` trains one part."""
+    from refiner.refinement.pipeline import _WEIGHTS
+
+    parts = train_learned(dataset, out, split=split, only=only, **kwargs)
+    if only is not None:
+        return None
+    calibrate_learned(parts, dataset, split=split)
+    if base is None:
+        base = _WEIGHTS / (f"{dataset.name}" + ("" if split == "all" else f"-{split}"))
+    info = {}
+    for name in LEARNED_PARTS:
+        log_path = Path(out) / "parts" / f"{name}.json"
+        if log_path.is_file():
+            info[name] = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"}
+    return install_learned(base, parts, out=out, info={"split": split, **info})
+
+
+def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all", clip_rate: float = CLIP_RATE) -> dict:
+    """Set both flaw thresholds on the clean clips of the split's held-out subjects (:func:`calibration_split`):
+    each detector flags at most ``clip_rate`` of them. Returns the thresholds."""
+    data = dataset.split(split)
+    held = np.flatnonzero(calibration_split(data.subjects))
+    clips, actions = [data.motions[i].joints for i in held], data.actions[held]
+    return {"classifier_threshold": parts["flaw_classifier"].calibrate(clips, clip_rate=clip_rate),
+            "flaw_threshold": parts["flaw_recognizer"].calibrate(clips, actions, clip_rate=clip_rate),
+            "correction_threshold_m": parts["flaw_repairer"].calibrate(clips, actions, clip_rate=clip_rate),
+            "clip_rate": clip_rate, "calibration_clips": int(len(held))}
