@@ -25,8 +25,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from refiner.core.contact import foot_joints
 from refiner.core.skeletons import bone_lengths, get_skeleton
-from refiner.evaluation.physics import foot_joints
 
 __all__ = ["flaw_features", "N_FEATURES"]
 
