@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Sequence
 
 from refiner.core.manifest import file_sha256, read_evaluator_manifest, write_manifest
+from refiner.core.serialization import save_state
 
 __all__ = ["EVALUATOR_WEIGHTS_DIR", "LICENCE_FILE", "SOURCE", "packaged_recognizer", "package_recognizers"]
 
@@ -78,7 +79,7 @@ def package_recognizers(source: str | os.PathLike, licence: str | os.PathLike, o
     dict
         The manifest written.
     """
-    from refiner.core.serialization import save_state
+    # here, not at the top: evaluators imports this module (and torch)
     from refiner.evaluation.evaluators import RECOGNIZERS, load_recognizer_state
 
     out = Path(out)
