@@ -11,12 +11,12 @@ from refiner.evaluation.metrics import (
     confidence_interval,
     confusion_matrix,
     diversity,
-    evaluate,
     fid,
     frechet_distance,
     mpjpe,
     multimodality,
 )
+from refiner.evaluation.protocol import evaluate
 
 
 def test_frechet_distance_of_known_gaussians():
