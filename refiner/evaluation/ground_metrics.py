@@ -174,10 +174,8 @@ def penetration(motion, *, skeleton: str | Skeleton = "humanact12", ground=None)
     float, or ndarray of shape (B,)
         Metres.
     """
-    x, skel, _, single = as_clip_batch(motion, skeleton, None, min_frames=1)
-    g = _ground(x, skel, ground)
-    low = heights(x, skel).min(-1)  # (B, T)
-    return per_clip(np.maximum(g[:, None] - low, 0.0).mean(-1), single)
+    clearance, single = _clearance(motion, skeleton, ground)
+    return per_clip(np.maximum(-clearance, 0.0).mean(-1), single)
 
 
 def floating(motion, *, skeleton: str | Skeleton = "humanact12", ground=None, tolerance: float = 0.005):
@@ -199,7 +197,11 @@ def floating(motion, *, skeleton: str | Skeleton = "humanact12", ground=None, to
     float, or ndarray of shape (B,)
         Metres.
     """
+    clearance, single = _clearance(motion, skeleton, ground)
+    return per_clip(np.maximum(clearance - tolerance, 0.0).mean(-1), single)
+
+
+def _clearance(motion, skeleton, ground) -> tuple[np.ndarray, bool]:
+    """``(B, T)`` height in metres of each frame's lowest joint above the ground, and whether one clip was given."""
     x, skel, _, single = as_clip_batch(motion, skeleton, None, min_frames=1)
-    g = _ground(x, skel, ground)
-    low = heights(x, skel).min(-1)
-    return per_clip(np.maximum(low - g[:, None] - tolerance, 0.0).mean(-1), single)
+    return heights(x, skel).min(-1) - _ground(x, skel, ground)[:, None], single
