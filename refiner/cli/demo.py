@@ -9,6 +9,7 @@ recogniser (hidden state ``"fixed"``, so before and after see the same noise) sc
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import time
@@ -17,13 +18,47 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
-__all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table"]
+from refiner.cli.options import GIF_DPI, GIF_PANEL_PX, gif_size_argument, int_or_str, set_threads, threads_argument
+from refiner.core.validation import check_action
+from refiner.io.datasets import HUMANACT12_ACTIONS
+from refiner.plugins.manager import get_plugin_manager
+from refiner.refinement.refined_generator import RefinedGenerator
 
-#: Default edge of one GIF panel in pixels (the demo's and ``refine --gif``'s before/after animations).
-GIF_PANEL_PX = 320
-#: Resolution the GIFs are drawn at; a panel is ``GIF_PANEL_PX / GIF_DPI`` inches.
-GIF_DPI = 80
+__all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table", "demo_arguments",
+           "demo_run"]
+
+
+def demo_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=Path, required=True, help="output folder (created)")
+    p.add_argument("--generator", default="a2m", choices=["a2m", "actor"],
+                   help="reference generator: a2m (Lie GRU VAE, default) or actor (transformer CVAE)")
+    p.add_argument("--actions", default=None,
+                   help="comma-separated action names or indices (default: all 12; --quick: walk, boxing)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-mp4", action="store_true", help="GIF only, even when ffmpeg is on PATH")
+    p.add_argument("--quick", action="store_true", help="two actions and a small animation (for tests)")
+    p.add_argument("--force", action="store_true", help="replace the demo's files in an existing --out folder")
+    gif_size_argument(p)
+    threads_argument(p)
+
+
+def demo_run(args: argparse.Namespace) -> int:
+    set_threads(args.threads)
+
+    actions = None if args.actions is None else [int_or_str(a) for a in args.actions.split(",") if a.strip()]
+    print(f"sampling {'every action' if actions is None and not args.quick else 'the chosen actions'} from the "
+          f"{args.generator!r} reference generator, refining and drawing into {args.out} ...", flush=True)
+    result = run_demo(args.out, generator=args.generator, actions=actions, quick=args.quick, random_state=args.seed,
+                      mp4=False if args.no_mp4 else None, progress=True, gif_size=args.gif_size, overwrite=args.force)
+    print(format_table(result.rows))
+    print("confidence: the HumanAct12 recogniser's probability of the sampled action (hidden state fixed); "
+          "anchors flagged: flagged / recognised anchors.")
+    n_files = sum(len(r.files) for r in result.rows) + len(result.files)
+    print(f"{n_files} files written to {result.out} in {result.seconds:.1f} s "
+          f"(per action: .gif before/after, _keyframes.png, _scores.png, _before/_after.npy, _report.json)")
+    return 0
 
 
 @dataclass
@@ -131,15 +166,11 @@ def run_demo(
         Unknown generator or action, missing weights or recogniser, a bad ``gif_size``, or files
         of the demo already in ``out`` without ``overwrite``.
     """
-    from tqdm.auto import tqdm
-
-    from refiner.core.validation import check_action
+    # these import torch or matplotlib: here, so that --help stays cheap
     from refiner.evaluation.evaluators import load_recognizer
     from refiner.io import viz
-    from refiner.io.datasets import HUMANACT12_ACTIONS
-    from refiner.plugins.manager import get_plugin_manager
     from refiner.reference.models import load_reference_generator
-    from refiner.refinement.refined_generator import RefinedGenerator
+    from refiner.refinement.pipeline import Refiner
 
     started = time.perf_counter()
     if isinstance(random_state, (bool, np.bool_)) or not isinstance(random_state, (int, np.integer)):
@@ -162,8 +193,6 @@ def run_demo(
     gen = load_reference_generator(generator, folder=generator_folder)
     pm = get_plugin_manager(autoload=False)
     if refiner is None:
-        from refiner.refinement.pipeline import Refiner
-
         refiner = Refiner.pretrained("humanact12")
     wrapped = RefinedGenerator(gen, adapter=gen.adapter, refiner=refiner, skeleton="humanact12",
                                adapter_options=gen.adapter_options(), plugin_manager=pm)

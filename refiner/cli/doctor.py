@@ -15,6 +15,12 @@ import platform
 import sys
 from pathlib import Path
 
+import refiner
+from refiner.core import manifest as mf
+from refiner.evaluation.evaluator_weights import packaged_recognizer
+from refiner.io.data_sources import DATA_ENV, data_status
+from refiner.io.datasets import default_data_dir
+
 __all__ = ["diagnose", "doctor_arguments", "doctor_run", "format_report"]
 
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
@@ -22,10 +28,6 @@ _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 
 def diagnose() -> dict:
     """Everything ``doctor`` reports (see the module docstring)."""
-    import refiner
-    from refiner.io.data_sources import DATA_ENV, data_status
-    from refiner.io.datasets import default_data_dir
-
     return {
         "package": {"version": refiner.__version__, "path": str(Path(refiner.__file__).parent),
                     "python": platform.python_version()},
@@ -40,7 +42,6 @@ def diagnose() -> dict:
 
 def _weights_folder(folder: Path) -> dict:
     """One shipped weights folder: its kind, what it lists and whether its manifest and files verify."""
-    from refiner.core import manifest as mf
     row = {"name": folder.name, "path": str(folder), "kind": "unknown", "entries": [], "verified": False,
            "error": None}
     try:
@@ -50,7 +51,7 @@ def _weights_folder(folder: Path) -> dict:
         elif "evaluators" in listed:
             row["kind"], (_, paths) = "evaluators", mf.read_evaluator_manifest(folder)
         else:
-            from refiner.refinement.pipeline import _PARTS
+            from refiner.refinement.pipeline import _PARTS  # imports torch: only for a refiner folder
 
             row["kind"], (_, paths) = "refiner", mf.read_refiner_manifest(folder, _PARTS)
         row["entries"], row["verified"] = sorted(paths), True
@@ -61,8 +62,7 @@ def _weights_folder(folder: Path) -> dict:
 
 def _evaluators() -> list[dict]:
     """Each Action2Motion recogniser: the shipped copy, the data-folder files, and which one loads."""
-    from refiner.evaluation.evaluator_weights import packaged_recognizer
-    from refiner.evaluation.evaluators import RECOGNIZERS, evaluators_dir
+    from refiner.evaluation.evaluators import RECOGNIZERS, evaluators_dir  # imports torch: here, so --help stays cheap
 
     folder = evaluators_dir()
     rows = []
@@ -79,7 +79,7 @@ def _evaluators() -> list[dict]:
 
 
 def _torch() -> dict:
-    import torch
+    import torch  # here, not at the top: --help must not load torch
 
     cuda = torch.cuda.is_available()
     return {"version": torch.__version__, "cuda_available": cuda, "cuda_build": torch.version.cuda,
@@ -87,7 +87,7 @@ def _torch() -> dict:
 
 
 def _threads() -> dict:
-    import torch
+    import torch  # here, not at the top: --help must not load torch
 
     affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {"cpu_count": os.cpu_count(), "usable_cpus": affinity, "torch_threads": torch.get_num_threads(),

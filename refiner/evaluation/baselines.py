@@ -154,7 +154,7 @@ class PipelineRefiner:
     """
 
     def __init__(self, mode: str, **pretrained_kwargs):
-        from refiner.refinement.pipeline import Refiner  # imported lazily: the pipeline is optional here
+        from refiner.refinement.pipeline import Refiner  # imports torch: here, so that importing the baselines stays cheap
 
         self.mode = mode
         self.kwargs = pretrained_kwargs

@@ -8,6 +8,11 @@ per family, with the families whose mechanism training never used
 repair step: they are given the true flaw mask and replace exactly those frames, by linear
 interpolation, by the repair network in-filling them (frames hidden), or by the repair network
 seeing them (frames given).
+
+The record (``flaws.json``): ``clips``, ``severities``, ``families``, ``held_out_families``, the refiners
+``skipped`` (name -> why), ``clean`` (name -> ``mpjpe_change_cm``, ``share_changed``), ``flawed`` (the
+:func:`flaw_records`), ``summary`` (severity -> name -> mean % removed over the training families, the
+held-out ones and all) and ``seconds``.
 """
 from __future__ import annotations
 
@@ -16,7 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from refiner.evaluation.bench import _humanact12_and_recognizer, markdown_table, one_thread, write_record
+from refiner.concepts.segmentation import segment
+from refiner.core.signal import linear_infill
+from refiner.evaluation.bench_setup import Progress, load_bench_humanact12, one_thread, write_record
+from refiner.evaluation.flaws import FLAW_FAMILIES, corrupt
+from refiner.refinement.training_flaws import HELD_OUT_FAMILIES
 
 __all__ = ["bench_flaws", "flaw_records", "ORACLES"]
 
@@ -24,8 +33,7 @@ ORACLES = ("oracle_linear", "oracle_infill", "oracle_given")
 
 
 def _oracle(name: str, model, flawed: np.ndarray, mask: np.ndarray, action: int) -> np.ndarray:
-    from refiner.core.signal import linear_infill
-
+    """``flawed`` with its ``mask`` frames replaced by the oracle ``name``'s proposal."""
     if not mask.any():
         return flawed
     if name == "oracle_linear":
@@ -46,9 +54,6 @@ def flaw_records(clips, refiners: dict, *, severities=(2,), model=None, families
     severity, refiner, ``mpjpe_cm`` (all frames), ``mpjpe_flawed_cm`` (true flaw frames),
     ``removed_pct``.
     """
-    from refiner.concepts.segmentation import segment
-    from refiner.evaluation.flaws import FLAW_FAMILIES, corrupt
-
     segs = [segment(m.joints) for m in clips]
     donors = [[d for j, d in enumerate(clips) if j != i and d.action == m.action] for i, m in enumerate(clips)]
     clean_rows = []
@@ -81,23 +86,18 @@ def flaw_records(clips, refiners: dict, *, severities=(2,), model=None, families
 
 @one_thread()
 def bench_flaws(data: Path | None, out: Path | None, quick: bool, *, stride: int = 1,
-                severities: tuple[int, ...] | None = None) -> str:
+                severities: tuple[int, ...] | None = None, progress: Progress | None = None) -> dict:
     """Seeded flaws on held-out HumanAct12 clips; see the module docstring. ``stride`` keeps every
     stride-th clip; ``severities`` default (2,) (the acceptance severity), ``quick`` every 68th clip (4).
-    Runs on one thread (:func:`~refiner.evaluation.bench.one_thread`).
-
-    With ``out`` writes ``flaws.json``: the clips, severities and families, the refiners ``skipped``
-    (name -> why), ``clean`` (name -> MPJPE change cm, share of clips changed), ``flawed`` (the
-    :func:`flaw_records`) and ``summary`` (severity -> name -> mean % removed over the training
-    families, the held-out ones and all).
+    Runs on one thread (:func:`~refiner.evaluation.bench_setup.one_thread`). Returns the record (see the
+    module docstring), written as ``flaws.json`` with ``out``; ``progress`` is accepted like every
+    suite's and not called.
     """
+    # the pipeline imports torch and the baselines scipy.signal: here, so that importing the suites stays cheap
     from refiner.evaluation.baselines import FLAW_REFINERS
-    from refiner.evaluation.flaws import FLAW_FAMILIES
     from refiner.refinement.pipeline import Refiner
-    from refiner.refinement.training_flaws import HELD_OUT_FAMILIES
 
-    dataset, _ = _humanact12_and_recognizer(data, hidden="fixed")
-    test = dataset.split("test")
+    test = load_bench_humanact12(data).split("test")
     step = 68 if quick else max(int(stride), 1)
     clips = test.subset(range(0, len(test), step)).motions
     severities = tuple(severities) if severities else (2,)
@@ -107,7 +107,6 @@ def bench_flaws(data: Path | None, out: Path | None, quick: bool, *, stride: int
             refiners[name] = factory()
         except Exception as e:  # an optional refiner that cannot be built is skipped, not fatal
             skipped[name] = f"{type(e).__name__}: {e}"
-    notes = [f"- `{name}` skipped: {why}" for name, why in skipped.items()]
     try:
         model = Refiner.pretrained("humanact12", split="train")
         model = model if model.flaw_repairer is not None else None
@@ -129,28 +128,4 @@ def bench_flaws(data: Path | None, out: Path | None, quick: bool, *, stride: int
             "training_mean_removed_pct": float(np.mean([v for f, v in r.items() if f not in HELD_OUT_FAMILIES])),
             "held_out_mean_removed_pct": float(np.mean([v for f, v in r.items() if f in HELD_OUT_FAMILIES])),
             "mean_removed_pct": float(np.mean(list(r.values())))} for name, r in removed.items()}
-    lines = [f"## Flaws (HumanAct12 subjects 11-12, {len(clips)} clips, severities {list(severities)})", "",
-             "Share of the flaw's added MPJPE removed (%, all frames, against the clean clip; negative = worse "
-             "than leaving the flaw). Held-out families (mechanism never used in training): "
-             + ", ".join(f"`{f}`" for f in HELD_OUT_FAMILIES) + ". Oracle rows get the true flaw mask.", ""]
-    lines += notes + ([""] if notes else [])
-    for severity in severities:
-        summary = rec["summary"][str(severity)]
-        rows = [[name] + [float(table[(f, severity, name)]["removed_pct"]) for f in FLAW_FAMILIES]
-                + [summary[name][k] for k in ("training_mean_removed_pct", "held_out_mean_removed_pct",
-                                              "mean_removed_pct")] for name in names]
-        header = ["refiner"] + [f + (" (held out)" if f in HELD_OUT_FAMILIES else "") for f in FLAW_FAMILIES]
-        lines += [f"### Severity {severity}: % of added MPJPE removed", "",
-                  markdown_table(header + ["mean, training families", "mean, held-out", "mean, all 7"], rows), ""]
-        mrows = [[name] + [float(table[(f, severity, name)]["mpjpe_cm"]) for f in FLAW_FAMILIES] for name in names]
-        lines += [f"### Severity {severity}: MPJPE (cm, all frames; `identity` = the flaw)", "",
-                  markdown_table(["refiner"] + list(FLAW_FAMILIES), mrows), ""]
-        frows = [[name] + [float(table[(f, severity, name)]["mpjpe_flawed_cm"]) for f in FLAW_FAMILIES]
-                 for name in names]
-        lines += [f"### Severity {severity}: MPJPE on the flawed frames only (cm)", "",
-                  markdown_table(["refiner"] + list(FLAW_FAMILIES), frows), ""]
-    lines += ["### Clean held-out clips (do no harm)", "",
-              markdown_table(["refiner", "MPJPE change cm", "share of clips changed"], clean_rows), "",
-              f"{seconds:.0f} s wall."]
-    write_record(out, "flaws", rec)
-    return "\n".join(lines)
+    return write_record(out, "flaws", rec)

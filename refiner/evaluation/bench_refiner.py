@@ -1,54 +1,61 @@
 """``motion-refiner bench refiner`` and ``bench speed``: the shipped refiner's figures on held-out clips.
 
-Both suites follow :mod:`refiner.evaluation.bench`: they return a Markdown section and, with ``out``, write
-their figures as ``refiner.json`` / ``speed.json`` (the numbers of the printed tables).
+Both suites follow :mod:`refiner.evaluation.bench_setup`: they return their record and, with ``out``, write
+it as ``refiner.json`` / ``speed.json``. ``refiner.json``: ``clips``, ``parameters`` (per part and total),
+(a) ``real_mpjpe_change_cm`` and ``real_clips_changed``, (b) ``boundary_acceleration`` (``boundaries``,
+``real_p99``, ``max``, ``median``, ``above_real_p99``; m/s²), (c) ``anchor_precision`` and
+``anchor_recall`` (±2 frames of the segmentation's anchors), (d) ``latency`` (``clips``, ``threads``,
+``median_ms``, ``p90_ms``) and ``anchor_quality_auc`` (per flaw family: ``pairs``, ROC AUC of the
+``pose`` mixture and of the ``encoder``-feature GMM). ``speed.json``: ``clips``, ``batch``,
+``devices`` (per device: ``name``, ``median_ms``, ``p90_ms``, ``clips_per_s``, ``peak_mib``, ``peak_of``)
+and ``parameters``.
 """
 from __future__ import annotations
 
+import resource
 import time
 from pathlib import Path
 
 import numpy as np
 
-from refiner.evaluation.bench import markdown_table, one_thread, write_record
+from refiner.concepts.segmentation import segment
+from refiner.evaluation.bench_setup import Progress, ignore_progress, load_bench_humanact12, one_thread, write_record
+from refiner.evaluation.flaws import corrupt
+from refiner.evaluation.physics import boundary_velocity_jump
 
 __all__ = ["bench_refiner", "bench_speed"]
 
-
-def _load_test_split(data: Path | None):
-    from refiner.io.datasets import load_humanact12
-
-    dataset = load_humanact12(None if data is None else Path(data) / "humanact12" / "humanact12_joints.npz")
-    return dataset.split("test")
+_WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 
 
 @one_thread()
-def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
+def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
     """Issue-3 figures for the shipped subject-1-10 weights on held-out subjects 11-12.
 
     (a) how much real clips change, (b) velocity jumps where refined windows meet kept frames
-    against real data's 99th percentile, (c) anchor recognition precision / recall against the
-    segmentation, (d) refine latency per 60-frame clip (CPU, batch 1), parameter counts, and the
-    anchor-quality comparison behind the ``quality`` default (pose mixture vs the paper's
-    encoder-feature GMM, ROC AUC on seeded anchor flaws). Runs on one thread (:func:`~refiner.evaluation.bench.one_thread`),
-    as ``refine`` itself does.
+    against real data's 99th percentile, (c) precision / recall of the anchors the refiner finds
+    against the segmentation's (the table calls them "anchor recognition"), (d) refine latency per
+    60-frame clip (CPU, batch 1), parameter counts, and the anchor-quality comparison behind the
+    ``quality`` default (pose mixture vs the paper's encoder-feature GMM, ROC AUC on seeded anchor
+    flaws). Runs on one thread
+    (:func:`~refiner.evaluation.bench_setup.one_thread`), as ``refine`` itself does. ``quick`` keeps every
+    16th clip. Progress events: ``"figures"`` (the record once (a)-(c) are known) and ``"latency"``
+    (the record once (d) is).
     """
+    # torch and sklearn.metrics are slow to import: here, so that importing the suites
+    # (``motion-refiner --help``) stays cheap
     import torch
     from sklearn.metrics import roc_auc_score
 
-    from refiner.concepts.segmentation import segment
-    from refiner.evaluation.flaws import corrupt
-    from refiner.evaluation.physics import boundary_velocity_jump
     from refiner.refinement.pipeline import Refiner
     from refiner.refinement.recognition import match_anchors
 
-    test = _load_test_split(data)
+    progress = progress or ignore_progress
+    test = load_bench_humanact12(data).split("test")
     clips = test.motions[:: (16 if quick else 1)]
     model = Refiner.pretrained("humanact12", split="train")
     counts = model.n_parameters()
     rec = {"clips": len(clips), "parameters": counts}
-    lines = [f"## Refiner (shipped subject-1-10 weights, {len(clips)} held-out clips of subjects 11-12)", "",
-             "Parameters: " + ", ".join(f"{k} {v:,}" for k, v in counts.items()) + " (paper: 6.23 M)."]
 
     segs = [segment(m.joints) for m in clips]
     change, frames, n_changed, tp, n_pred, n_ref = 0.0, 0, 0, 0, 0, 0
@@ -78,18 +85,7 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
             "above_real_p99": int(np.sum(np.array(jumps) > p99))},
         "anchor_precision": float(tp / max(n_pred, 1)), "anchor_recall": float(tp / max(n_ref, 1)),
     })
-    b = rec["boundary_acceleration"]
-    lines += ["", markdown_table(["figure", "value", "target"], [
-        ["(a) real clips: MPJPE change (cm)", rec["real_mpjpe_change_cm"], "< 0.3"],
-        ["(a) real clips changed at all", f"{n_changed} / {len(clips)}", ""],
-        ["(b) largest boundary acceleration (m/s²), refined drifted clips",
-         "no boundary" if b["max"] is None else b["max"], f"real p99 {p99:.1f}"],
-        ["(b) median boundary acceleration (m/s²)", "-" if b["median"] is None else b["median"], ""],
-        ["(b) boundaries above real p99", f"{b['above_real_p99']} / {len(jumps)}", ""],
-        ["(c) anchor recognition precision (±2 frames)", rec["anchor_precision"], ""],
-        ["(c) anchor recognition recall (±2 frames)", rec["anchor_recall"], ""],
-    ])]
-    print(lines[-1], flush=True)
+    progress("figures", rec)
 
     window = [m.joints[:60] for m in clips if m.n_frames >= 60][: (5 if quick else 50)]
     for x in window[:3]:
@@ -101,11 +97,7 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
         times.append(time.perf_counter() - t0)
     rec["latency"] = {"clips": len(times), "threads": model.threads_for(window[0]) or torch.get_num_threads(),
                       "median_ms": float(1000 * np.median(times)), "p90_ms": float(1000 * np.percentile(times, 90))}
-    lat = rec["latency"]
-    lines += ["", f"(d) refine latency per 60-frame clip, CPU batch 1 ({lat['threads']} threads, "
-                  f"{lat['clips']} clips): median **{lat['median_ms']:.1f} ms**, "
-                  f"90th percentile {lat['p90_ms']:.1f} ms (paper: 17 ms on a GPU)."]
-    print(lines[-1], flush=True)
+    progress("latency", rec)
 
     rec["anchor_quality_auc"] = {}
     rng = np.random.default_rng(0)
@@ -126,27 +118,26 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool) -> str:
                 enc_s.append(-model.recognizer.recognize(clip, anchors=a).scores[k])
         rec["anchor_quality_auc"][family] = {"pairs": len(labels) // 2, "pose": float(roc_auc_score(labels, pose_s)),
                                              "encoder": float(roc_auc_score(labels, enc_s))}
-    rows = [[family, v["pose"], v["encoder"]] for family, v in rec["anchor_quality_auc"].items()]
-    lines += ["", "Anchor quality scores, ROC AUC separating a seeded flawed anchor (severity 2) from a real one:", "",
-              markdown_table(["flaw", "pose mixture (default)", "encoder-feature GMM (paper)"], rows)]
-    write_record(out, "refiner", rec)
-    return "\n".join(lines)
+    return write_record(out, "refiner", rec)
 
 
-def bench_speed(data: Path | None, out: Path | None, quick: bool) -> str:
-    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters, CPU and CUDA."""
-    import resource
+def bench_speed(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
+    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters, CPU and CUDA.
 
-    import torch
+    ``quick``: 8 clips and batches of 8 (else 64 and 256). Progress event ``"device"``: each row of
+    ``devices`` as it is measured.
+    """
+    import torch  # here, not at the top: see bench_refiner
 
     from refiner.refinement.pipeline import Refiner
 
-    clips = [m.joints[:60] for m in _load_test_split(data) if m.n_frames >= 60][: (8 if quick else 64)]
+    progress = progress or ignore_progress
+    clips = [m.joints[:60] for m in load_bench_humanact12(data).split("test") if m.n_frames >= 60][: (8 if quick else 64)]
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     batch_size = 8 if quick else 256
     rec = {"clips": len(clips), "batch": batch_size, "devices": []}
     for device in devices:
-        model = Refiner.load(Path(__file__).resolve().parents[1] / "weights" / "humanact12-train", device=device)
+        model = Refiner.load(_WEIGHTS / "humanact12-train", device=device)
         for x in clips[:3]:
             model.refine(x)  # warm up (first calls allocate and compile kernels)
         times = []
@@ -173,15 +164,6 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool) -> str:
             "peak_mib": float(torch.cuda.max_memory_allocated() / 2**20 if device == "cuda"
                               else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
             "peak_of": "CUDA" if device == "cuda" else "process RSS"})
-        print(f"  {device}: median {rec['devices'][-1]['median_ms']:.1f} ms per 60-frame clip", flush=True)
+        progress("device", rec["devices"][-1])
     rec["parameters"] = Refiner.pretrained("humanact12", split="train").n_parameters()
-    rows = [[d["device"], d["name"], d["median_ms"], d["p90_ms"], d["clips_per_s"],
-             f"{d['peak_mib']:.0f} MiB ({d['peak_of']})"] for d in rec["devices"]]
-    write_record(out, "speed", rec)
-    return "\n".join([
-        f"## Speed ({len(clips)} held-out 60-frame clips; paper: 0.017 s per clip, 6.23 M parameters)", "",
-        markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", f"clips / s (batch of {batch_size})",
-                        "peak memory"], rows),
-        "", "Parameters: " + ", ".join(f"{k} {v:,}" for k, v in rec["parameters"].items()) + ".",
-        "" if "cuda" in devices else "No CUDA device here; run the same command on a GPU machine for the GPU rows.",
-    ])
+    return write_record(out, "speed", rec)

@@ -7,6 +7,9 @@ and with each seeded flaw family of :mod:`refiner.evaluation.flaws` (severity 2,
 converted, seed = clip index), refined with the action unknown (the other layouts' datasets have
 other labels), and scored against the converted clean clip: MPJPE change of clean clips and share
 of clips touched; share of each flaw's added MPJPE removed.
+
+The record (``skeletons.json``): ``clips``, ``stride`` (every how many held-out clips were kept),
+``seconds`` and ``skeletons`` (:func:`skeleton_records`).
 """
 from __future__ import annotations
 
@@ -15,7 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from refiner.evaluation.bench import _humanact12_and_recognizer, markdown_table, one_thread, write_record
+from refiner.concepts.segmentation import segment
+from refiner.core.skeletons import convert
+from refiner.evaluation.bench_setup import Progress, load_bench_humanact12, one_thread, write_record
+from refiner.evaluation.flaws import FLAW_FAMILIES, corrupt
 
 __all__ = ["bench_skeletons", "skeleton_records", "SKELETONS"]
 
@@ -26,10 +32,7 @@ SKELETONS = ("humanact12", "uestc", "cmu_mocap", "humanml3d")
 def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = "train") -> dict:
     """Per skeleton: ``clean_mpjpe_change_cm``, ``clean_clips_changed`` (share), ``removed_pct`` per
     family and ``mean_removed_pct``, for ``clips`` (Motions on the 24 HumanAct12 joints)."""
-    from refiner.concepts.segmentation import segment
-    from refiner.core.skeletons import convert
-    from refiner.evaluation.flaws import FLAW_FAMILIES, corrupt
-    from refiner.refinement.pipeline import Refiner
+    from refiner.refinement.pipeline import Refiner  # imports torch: here, so that importing the suites stays cheap
 
     families = list(families or FLAW_FAMILIES)
     segs = [segment(m.joints) for m in clips]
@@ -58,24 +61,19 @@ def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = 
 
 
 @one_thread()
-def bench_skeletons(data: Path | None, out: Path | None, quick: bool, *, stride: int = 4) -> str:
-    """One row per skeleton (see the module docstring); ``quick``: 4 clips, 2 families, 2 skeletons."""
-    dataset, _ = _humanact12_and_recognizer(data, hidden="fixed")
-    test = dataset.split("test")
-    clips = test.motions[:: 90 if quick else stride]  # quick: 4 clips
+def bench_skeletons(data: Path | None, out: Path | None, quick: bool, *, stride: int = 4,
+                    progress: Progress | None = None) -> dict:
+    """One row per skeleton (see the module docstring); ``quick``: 4 clips, 2 families, 2 skeletons.
+
+    Returns the record, written as ``skeletons.json`` with ``out``; ``progress`` is accepted like every
+    suite's and not called.
+    """
+    test = load_bench_humanact12(data).split("test")
+    stride = 90 if quick else stride  # quick: 4 clips
+    clips = test.motions[::stride]
     skeletons = SKELETONS[:2] if quick else SKELETONS
     families = ("frozen_transition", "foot_sliding") if quick else None
     t0 = time.perf_counter()
     rec = skeleton_records(clips, skeletons, families=families)
     seconds = time.perf_counter() - t0
-    names = list(next(iter(rec.values()))["removed_pct"])
-    rows = [[s, r["clean_mpjpe_change_cm"], r["clean_clips_changed"], *[r["removed_pct"][f] for f in names],
-             r["mean_removed_pct"]] for s, r in rec.items()]
-    write_record(out, "skeletons", {"clips": len(clips), "seconds": seconds, "skeletons": rec})
-    return "\n".join([
-        f"## Skeletons (HumanAct12 subjects 11-12, every {90 if quick else stride}th clip: {len(clips)} clips, "
-        "converted to each layout; severity 2; action unknown)", "",
-        "humanact12 has weights of its own; the others are refined through them (`ConvertedRefiner`).", "",
-        markdown_table(["skeleton", "clean: MPJPE change cm", "clean: share of clips changed",
-                        *[f"{f}: % removed" for f in names], "mean % removed"], rows), "",
-        f"{seconds:.0f} s wall."])
+    return write_record(out, "skeletons", {"clips": len(clips), "stride": stride, "seconds": seconds, "skeletons": rec})

@@ -1,110 +1,27 @@
-"""Handlers of the ``demo``, ``refine`` and ``train-generator`` sub-commands of ``motion-refiner``.
+"""``motion-refiner refine``: refine motion files (.npy/.npz joints or raw generator output through an adapter).
 
-Each sub-command is a pair ``(add_arguments, run)`` registered in :data:`refiner.cli.main.COMMANDS`;
-``run`` returns the exit code. Like :mod:`refiner.cli.main`, this module writes to stdout.
+Each input file gives one output (``.npy``, or ``.npz`` for clips of different lengths) and, on request,
+its report, before/after GIFs and BVH files. A file that cannot be read or refined is reported and
+skipped; the others are still written.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 import traceback
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
-__all__ = [
-    "demo_arguments",
-    "demo_run",
-    "refine_arguments",
-    "refine_run",
-    "train_generator_arguments",
-    "train_generator_run",
-    "load_input",
-]
+from refiner.cli.options import GIF_DPI, gif_size_argument, int_or_str, set_threads, threads_argument
+from refiner.core.motion import Motion
+from refiner.core.skeletons import get_skeleton
+from refiner.io.bvh import save_bvh
+from refiner.plugins.manager import get_plugin_manager
 
-
-# ----------------------------------------------------------------------------------------------
-# train-generator
-
-
-def train_generator_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--kind", required=True, choices=["a2m", "actor"],
-                   help="a2m: Action2Motion-style Lie GRU VAE; actor: ACTOR-style transformer CVAE")
-    p.add_argument("--out", type=Path, required=True,
-                   help="folder for <kind>.safetensors and manifest.json (refiner/weights/generators ships them)")
-    p.add_argument("--data", type=Path, default=None, help="HumanAct12 file or folder (default: ../shared/data/...)")
-    p.add_argument("--split", default="train", choices=["train", "all"], help="train = subjects 1-10 (shipped)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--max-seconds", type=float, default=None,
-                   help="training time limit (default none: fixed epochs with early stopping, reproducible)")
-    p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu, cuda, ...")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
-    p.add_argument("--quick", action="store_true", help="tiny network, a few steps (for tests)")
-
-
-def train_generator_run(args: argparse.Namespace) -> int:
-    from refiner.io.datasets import load_dataset
-    from refiner.reference.models import train_reference_generator
-
-    _set_threads(args.threads)
-    dataset = load_dataset("humanact12", args.data)
-    command = "motion-refiner train-generator " + " ".join(
-        shlex.quote(a) for a in (f"--kind={args.kind}", f"--out={args.out}", f"--split={args.split}", f"--seed={args.seed}")
-        + ((f"--max-seconds={args.max_seconds:g}",) if args.max_seconds else ())
-        + ((f"--threads={args.threads}",) if args.threads else ()) + (("--quick",) if args.quick else ()))
-    gen = train_reference_generator(args.kind, dataset, args.out, split=args.split, quick=args.quick,
-                                    max_seconds=args.max_seconds, random_state=args.seed, device=args.device,
-                                    verbose=True, command=command)
-    best = min((h["val"] for h in gen.history_ if "val" in h), default=float("nan"))
-    print(f"trained {type(gen).__name__} ({args.kind}) on HumanAct12 split {args.split!r}: "
-          f"{gen.n_parameters():,} parameters, {len(gen.history_)} epochs, best validation loss {best:.4f}, "
-          f"{gen.train_seconds_:.0f} s")
-    print(f"written to {args.out / (args.kind + '.safetensors')} (float16) and {args.out / 'manifest.json'}")
-    return 0
-
-
-
-# ----------------------------------------------------------------------------------------------
-# demo
-
-
-def demo_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", type=Path, required=True, help="output folder (created)")
-    p.add_argument("--generator", default="a2m", choices=["a2m", "actor"],
-                   help="reference generator: a2m (Lie GRU VAE, default) or actor (transformer CVAE)")
-    p.add_argument("--actions", default=None,
-                   help="comma-separated action names or indices (default: all 12; --quick: walk, boxing)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--no-mp4", action="store_true", help="GIF only, even when ffmpeg is on PATH")
-    p.add_argument("--quick", action="store_true", help="two actions and a small animation (for tests)")
-    p.add_argument("--force", action="store_true", help="replace the demo's files in an existing --out folder")
-    _gif_size_argument(p)
-    _threads_argument(p)
-
-
-def demo_run(args: argparse.Namespace) -> int:
-    from refiner.cli.demo import format_table, run_demo
-
-    _set_threads(args.threads)
-
-    actions = None if args.actions is None else [_int_or_str(a) for a in args.actions.split(",") if a.strip()]
-    print(f"sampling {'every action' if actions is None and not args.quick else 'the chosen actions'} from the "
-          f"{args.generator!r} reference generator, refining and drawing into {args.out} ...", flush=True)
-    result = run_demo(args.out, generator=args.generator, actions=actions, quick=args.quick, random_state=args.seed,
-                      mp4=False if args.no_mp4 else None, progress=True, gif_size=args.gif_size, overwrite=args.force)
-    print(format_table(result.rows))
-    print("confidence: the HumanAct12 recogniser's probability of the sampled action (hidden state fixed); "
-          "anchors flagged: flagged / recognised anchors.")
-    n_files = sum(len(r.files) for r in result.rows) + len(result.files)
-    print(f"{n_files} files written to {result.out} in {result.seconds:.1f} s "
-          f"(per action: .gif before/after, _keyframes.png, _scores.png, _before/_after.npy, _report.json)")
-    return 0
-
-
-# ----------------------------------------------------------------------------------------------
-# refine
+__all__ = ["refine_arguments", "refine_run", "load_input"]
 
 
 _SUFFIXES = (".npy", ".npz")
@@ -127,20 +44,16 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--refiner", type=Path, default=None, help="folder of a saved refiner (default: shipped weights)")
     p.add_argument("--report", action="store_true", help="write <out>.report.json next to each output")
     p.add_argument("--gif", action="store_true", help="write a before/after <out>.gif next to each output")
-    _gif_size_argument(p)
+    gif_size_argument(p)
     p.add_argument("--bvh", action="store_true", help="write the refined motion as <out>.bvh (exact joint positions)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
-    _threads_argument(p)
+    threads_argument(p)
 
 
 def refine_run(args: argparse.Namespace) -> int:
-    from tqdm.auto import tqdm
+    from refiner.refinement.pipeline import Refiner  # imports torch: here, so that --help stays cheap
 
-    from refiner.core.skeletons import get_skeleton
-    from refiner.plugins.manager import get_plugin_manager
-    from refiner.refinement.pipeline import Refiner
-
-    _set_threads(args.threads)
+    set_threads(args.threads)
     skeleton = get_skeleton(args.skeleton).name
     options = _parse_options(args.option)
     if options and args.adapter is None:
@@ -226,13 +139,9 @@ def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12"
     ValueError
         Unreadable file, no usable array, wrong shape, or whatever the adapter rejects.
     """
-    from refiner.core.motion import Motion
-
     path = Path(path)
     raw, labels = _read_array_file(path, want_dict=adapter is not None)
     if adapter is not None:
-        from refiner.plugins.manager import get_plugin_manager
-
         pm = plugin_manager if plugin_manager is not None else get_plugin_manager()
         motions = pm.convert(adapter, raw, skeleton=skeleton, options=options or {})
         batched = True
@@ -282,7 +191,7 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
     if existing and not args.force:
         raise ValueError(f"refusing to overwrite {', '.join(existing)}; pass --force.")
 
-    action = None if args.action is None else _int_or_str(args.action)
+    action = None if args.action is None else int_or_str(args.action)
     refined, reports = [], []
     for i, motion in enumerate(motions):
         try:
@@ -305,16 +214,13 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
         Path(f"{stem}.report.json").write_text(json.dumps(payload, indent=1) + "\n")
         written.append(Path(f"{stem}.report.json"))
     if args.gif:
-        from refiner.cli.demo import GIF_DPI
-        from refiner.io import viz
+        from refiner.io import viz  # imports matplotlib: here, so that --help stays cheap
 
         for s, before, after, report in zip(per_clip, motions, refined, reports):
             written += viz.animate(before, after, flagged=report.flagged_anchors, path=Path(f"{stem}{s}.gif"),
                                    labels=("input", "refined"), mp4=False, panel_size=args.gif_size / GIF_DPI,
                                    dpi=GIF_DPI, progress=progress)
     if args.bvh:
-        from refiner.io.bvh import save_bvh
-
         for s, after in zip(per_clip, refined):
             save_bvh(after, Path(f"{stem}{s}.bvh"), translations=True)
             written.append(Path(f"{stem}{s}.bvh"))
@@ -345,36 +251,6 @@ def _read_array_file(path: Path, *, want_dict: bool):
     raise ValueError(f"{path.name} holds several arrays ({', '.join(arrays)}); name the joints 'joints'.")
 
 
-def _gif_size_argument(p: argparse.ArgumentParser) -> None:
-    from refiner.cli.demo import GIF_PANEL_PX
-
-    p.add_argument("--gif-size", type=_positive_int, default=GIF_PANEL_PX, metavar="PX",
-                   help=f"edge of each GIF panel in pixels (default {GIF_PANEL_PX}; before/after side by side)")
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive int; got {text!r}")
-    return value
-
-
-def _threads_argument(p: argparse.ArgumentParser) -> None:
-    # The networks are small: on CPU one thread is several times faster than torch's default
-    # (on a busy 2-core machine a GRU step took 20 ms with 2 threads and 0.07 ms with 1).
-    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1: fastest for these networks)")
-
-
-def _set_threads(threads: int | None) -> None:
-    if threads is None:
-        return
-    if threads < 1:
-        raise ValueError(f"`--threads` must be a positive int; got {threads}.")
-    import torch
-
-    torch.set_num_threads(threads)
-
-
 def _parse_options(items) -> dict:
     options = {}
     for item in items:
@@ -386,8 +262,3 @@ def _parse_options(items) -> dict:
         except json.JSONDecodeError:
             options[key.strip()] = value
     return options
-
-
-def _int_or_str(value: str):
-    value = value.strip()
-    return int(value) if value.lstrip("-").isdigit() else value

@@ -1,0 +1,63 @@
+"""``motion-refiner bench``: run benchmark suites, print their tables as they finish, write ``REPORT.md``.
+
+The suites (:data:`refiner.evaluation.bench.SUITES`) return records and write ``<suite>.json``; this
+module prints their progress lines and Markdown sections (:mod:`refiner.cli.bench_tables`) and, with
+``--out``, collects the sections into ``REPORT.md``.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from refiner.cli.bench_tables import PROGRESS, SECTIONS
+from refiner.evaluation.bench import SUITES
+
+__all__ = ["bench_arguments", "bench_run", "run_benchmarks"]
+
+
+def bench_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("suite", nargs="?", default="all", choices=[*SUITES, "all"])
+    p.add_argument("--data", type=Path, default=None, help="folder holding humanact12/ (default: ../shared/data)")
+    p.add_argument("--out", type=Path, default=None, help="folder for REPORT.md, plots and <suite>.json (the figures as records)")
+    p.add_argument("--quick", action="store_true", help="tiny configuration (for tests)")
+    p.add_argument("--stride", type=int, default=1, help="flaws, skeletons: keep every N-th held-out clip (skeletons default 4)")
+    p.add_argument("--severity", type=int, action="append", choices=[1, 2, 3], help="flaws: only these severities")
+
+
+def bench_run(args: argparse.Namespace) -> int:
+    return run_benchmarks(args.suite, data=args.data, out=args.out, quick=args.quick, stride=args.stride,
+                          severities=tuple(args.severity) if args.severity else None)
+
+
+def run_benchmarks(suite: str, *, data: Path | None = None, out: Path | None = None, quick: bool = False,
+                   stride: int = 1, severities: tuple[int, ...] | None = None) -> int:
+    """Run ``suite`` (or ``"all"``), printing each suite's progress and section; returns the exit code 0.
+
+    With ``out`` every suite writes ``<suite>.json`` there and the sections are written as ``REPORT.md``.
+    """
+    names = list(SUITES) if suite == "all" else [suite]
+    sections = []
+    for name in names:
+        extra = ({"stride": stride, "severities": severities} if name == "flaws"
+                 else {"stride": stride} if name == "skeletons" and stride > 1 else {})
+        record = SUITES[name](data, out, quick, progress=_printer(name), **extra)
+        section = SECTIONS[name](record)
+        print(section, flush=True)
+        print(flush=True)
+        sections.append(section)
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "REPORT.md").write_text("# motion-refiner benchmark report\n\n" + "\n\n".join(sections) + "\n")
+        print(f"report written to {out / 'REPORT.md'}")
+    return 0
+
+
+def _printer(suite: str):
+    """The ``progress`` callback of ``suite``: print the line of each event that has one."""
+    def progress(event: str, payload: dict) -> None:
+        line = PROGRESS.get((suite, event))
+        if line is not None:
+            print(line(payload), flush=True)
+
+    return progress

@@ -1,0 +1,265 @@
+"""The Markdown sections and progress lines ``motion-refiner bench`` prints, made from the suites' records.
+
+:data:`SECTIONS` maps a suite name to ``record -> str`` (the section printed and collected into
+``REPORT.md``), :data:`PROGRESS` a ``(suite, event)`` pair to ``payload -> str`` (a line printed while
+the suite runs). The records are described in each suite's module (:mod:`refiner.evaluation.bench`).
+"""
+from __future__ import annotations
+
+import json
+from typing import Callable
+
+__all__ = ["markdown_table", "SECTIONS", "PROGRESS"]
+
+
+def markdown_table(header: list[str], rows: list[list]) -> str:
+    """A Markdown table; floats with three decimals."""
+    def fmt(v):
+        return f"{v:.3f}" if isinstance(v, float) else str(v)
+
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _pm(value: list, scale: float = 1.0, spec: str = ".3f") -> str:
+    """``[mean, half-width]`` as the tables print it, ``mean ± half-width``."""
+    return f"{scale * value[0]:{spec}} ± {scale * value[1]:{spec}}"
+
+
+def _parameters(counts: dict) -> str:
+    return ", ".join(f"{k} {v:,}" for k, v in counts.items())
+
+
+# ----------------------------------------------------------------------------------------------
+# concepts
+
+
+def _concepts_segmented(rec: dict) -> str:
+    return (f"Segmenting all {rec['clips']} clips at λ={rec['penalty']:g}: **{rec['segment_seconds']:.1f} s** "
+            f"wall on this machine (target: 30 s or less for 1,191 clips).")
+
+
+def _concepts_penalty(r: dict) -> str:
+    return (f"  λ={r['penalty']:g}: {r['transitions_per_clip']:.2f} transitions/clip, {r['mean_transition_frames']:.1f} "
+            f"frames each, MPJPE {r['mpjpe_cm']:.3f} cm")
+
+
+def _concepts(rec: dict) -> str:
+    rows = [[f"{r['penalty']:g}", r["transitions_per_clip"], r["mean_transition_frames"], r["mpjpe_cm"],
+             r["mpjpe_mean_of_actions_cm"], r["paper_mpjpe_cm"]] for r in rec["penalties"]]
+    clusters = list(rec["kmeans"][0]["distance_cm"]) if rec["kmeans"] else []
+    krows = [[r["action"], r["anchors"]] + ["-" if v is None else v for v in r["distance_cm"].values()]
+             for r in rec["kmeans"]]
+    return "\n".join([
+        f"## Concepts (HumanAct12, {rec['clips']} clips, {rec['frames']} frames)", "", _concepts_segmented(rec),
+        "", "λ in cm² per joint (see `refiner.concepts.segmentation`). MPJPE of the spline reconstruction, cm.", "",
+        markdown_table(["λ", "transitions / clip", "mean transition frames", "MPJPE (all frames)",
+                        "MPJPE (mean of actions)", "paper Table 2 MPJPE"], rows),
+        "", "Anchor K-means: mean joint distance to the assigned centre (cm) by number of clusters.", "",
+        markdown_table(["action", "anchors"] + [f"k={k}" for k in clusters], krows)])
+
+
+# ----------------------------------------------------------------------------------------------
+# refiner and speed
+
+
+def _refiner_figures(rec: dict) -> str:
+    b = rec["boundary_acceleration"]
+    return markdown_table(["figure", "value", "target"], [
+        ["(a) real clips: MPJPE change (cm)", rec["real_mpjpe_change_cm"], "< 0.3"],
+        ["(a) real clips changed at all", f"{rec['real_clips_changed']} / {rec['clips']}", ""],
+        ["(b) largest boundary acceleration (m/s²), refined drifted clips",
+         "no boundary" if b["max"] is None else b["max"], f"real p99 {b['real_p99']:.1f}"],
+        ["(b) median boundary acceleration (m/s²)", "-" if b["median"] is None else b["median"], ""],
+        ["(b) boundaries above real p99", f"{b['above_real_p99']} / {b['boundaries']}", ""],
+        ["(c) anchor recognition precision (±2 frames)", rec["anchor_precision"], ""],
+        ["(c) anchor recognition recall (±2 frames)", rec["anchor_recall"], ""],
+    ])
+
+
+def _refiner_latency(rec: dict) -> str:
+    lat = rec["latency"]
+    return (f"(d) refine latency per 60-frame clip, CPU batch 1 ({lat['threads']} threads, "
+            f"{lat['clips']} clips): median **{lat['median_ms']:.1f} ms**, "
+            f"90th percentile {lat['p90_ms']:.1f} ms (paper: 17 ms on a GPU).")
+
+
+def _refiner(rec: dict) -> str:
+    rows = [[family, v["pose"], v["encoder"]] for family, v in rec["anchor_quality_auc"].items()]
+    return "\n".join([
+        f"## Refiner (shipped subject-1-10 weights, {rec['clips']} held-out clips of subjects 11-12)", "",
+        "Parameters: " + _parameters(rec["parameters"]) + " (paper: 6.23 M).",
+        "", _refiner_figures(rec), "", _refiner_latency(rec),
+        "", "Anchor quality scores, ROC AUC separating a seeded flawed anchor (severity 2) from a real one:", "",
+        markdown_table(["flaw", "pose mixture (default)", "encoder-feature GMM (paper)"], rows)])
+
+
+def _speed_device(d: dict) -> str:
+    return f"  {d['device']}: median {d['median_ms']:.1f} ms per 60-frame clip"
+
+
+def _speed(rec: dict) -> str:
+    rows = [[d["device"], d["name"], d["median_ms"], d["p90_ms"], d["clips_per_s"],
+             f"{d['peak_mib']:.0f} MiB ({d['peak_of']})"] for d in rec["devices"]]
+    cuda = any(d["device"] == "cuda" for d in rec["devices"])
+    return "\n".join([
+        f"## Speed ({rec['clips']} held-out 60-frame clips; paper: 0.017 s per clip, 6.23 M parameters)", "",
+        markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", f"clips / s (batch of {rec['batch']})",
+                        "peak memory"], rows),
+        "", "Parameters: " + _parameters(rec["parameters"]) + ".",
+        "" if cuda else "No CUDA device here; run the same command on a GPU machine for the GPU rows.",
+    ])
+
+
+# ----------------------------------------------------------------------------------------------
+# sanity and generators (the Action2Motion protocol)
+
+
+def _sanity_comparison(c: dict) -> str:
+    return f"  {c['label']}: FID {c['metrics']['fid'][0]:.3f}, accuracy {100 * c['metrics']['accuracy'][0]:.1f} %"
+
+
+def _sanity(rec: dict) -> str:
+    rows = [[label, _pm(c["metrics"]["fid"]), _pm(c["metrics"]["accuracy"], 100, ".1f")]
+            + [_pm(c["metrics"][k]) for k in ("diversity", "multimodality", "real_diversity")] + [f"{c['seconds']:.1f}"]
+            for label, c in rec["comparisons"].items()]
+    return "\n".join([
+        f"## Evaluator sanity (HumanAct12 recogniser, {rec['test_clips']} test clips of subjects 11-12 vs "
+        f"{rec['train_clips']} train clips)", "",
+        f"Action2Motion protocol: {rec['n_crops']} random 60-frame crops per side (with replacement), fresh N(0,1) GRU "
+        f"hidden state per replication, {rec['n_replications']} replications, mean ± 1.96·σ/√R. 'matched' draws the "
+        "reference crops with the same action mixture.", "",
+        markdown_table(["comparison", "FID", "accuracy %", "diversity", "multimodality", "reference diversity",
+                        "seconds"], rows)])
+
+
+def _generators_row(r: dict) -> str:
+    m = r["metrics"]
+    return f"  {r['kind']} {r['label']}: accuracy {100 * m['accuracy'][0]:.1f} %, FID {m['fid'][0]:.3f}"
+
+
+def _generators(rec: dict) -> str:
+    rows = []
+    for key, r in rec["rows"].items():
+        m = r["metrics"]
+        rows.append(["real clips (subjects 1-10)", "real"] if key == "real" else key.split("/"))
+        rows[-1] += [_pm(m["accuracy"], 100, ".1f"), _pm(m["fid"]), f"{m['diversity'][0]:.3f}",
+                     f"{m['multimodality'][0]:.3f}"]
+        rows[-1] += [f"{100 * r['frames_changed']:.1f}", f"{r['flagged_anchors_per_clip']:.2f}",
+                     f"{r['refine_seconds_per_clip']:.2f}"] if "frames_changed" in r else ["", "", ""]
+    return "\n".join([
+        f"## Reference generators (HumanAct12; {rec['per_action']} samples per action, refiner trained on subjects "
+        f"1-10, reference: {rec['reference_clips']} clips of subjects 11-12)", "",
+        "Both generators were trained on subjects 1-10 (`motion-refiner train-generator`). Each sample is "
+        "converted by the `action2motion` adapter and refined with its sampled action by "
+        "`Refiner.pretrained(split=\"train\")`. Metrics follow the Action2Motion protocol "
+        f"(`refiner.evaluation.metrics.evaluate`, random GRU hidden state, {rec['n_replications']} replications, "
+        "mean ± 95 % interval), real crops drawn with the generated action mixture. Accuracy is the recogniser's on "
+        "the samples.", "",
+        markdown_table(["generator", "samples", "accuracy %", "FID", "diversity", "multimodality",
+                        "frames changed %", "flagged anchors / clip", "refine s / clip"], rows)])
+
+
+# ----------------------------------------------------------------------------------------------
+# flaws, samples, skeletons
+
+
+def _flaws(rec: dict) -> str:
+    families, held_out, records = rec["families"], rec["held_out_families"], rec["flawed"]
+    names = list(dict.fromkeys(r["refiner"] for r in records))
+    table = {(r["family"], r["severity"], r["refiner"]): r for r in records}
+    lines = [f"## Flaws (HumanAct12 subjects 11-12, {rec['clips']} clips, severities {rec['severities']})", "",
+             "Share of the flaw's added MPJPE removed (%, all frames, against the clean clip; negative = worse "
+             "than leaving the flaw). Held-out families (mechanism never used in training): "
+             + ", ".join(f"`{f}`" for f in held_out) + ". Oracle rows get the true flaw mask.", ""]
+    notes = [f"- `{name}` skipped: {why}" for name, why in rec["skipped"].items()]
+    lines += notes + ([""] if notes else [])
+    for severity in rec["severities"]:
+        summary = rec["summary"][str(severity)]
+        rows = [[name] + [float(table[(f, severity, name)]["removed_pct"]) for f in families]
+                + [summary[name][k] for k in ("training_mean_removed_pct", "held_out_mean_removed_pct",
+                                              "mean_removed_pct")] for name in names]
+        header = ["refiner"] + [f + (" (held out)" if f in held_out else "") for f in families]
+        lines += [f"### Severity {severity}: % of added MPJPE removed", "",
+                  markdown_table(header + ["mean, training families", "mean, held-out", "mean, all 7"], rows), ""]
+        mrows = [[name] + [float(table[(f, severity, name)]["mpjpe_cm"]) for f in families] for name in names]
+        lines += [f"### Severity {severity}: MPJPE (cm, all frames; `identity` = the flaw)", "",
+                  markdown_table(["refiner"] + list(families), mrows), ""]
+        frows = [[name] + [float(table[(f, severity, name)]["mpjpe_flawed_cm"]) for f in families]
+                 for name in names]
+        lines += [f"### Severity {severity}: MPJPE on the flawed frames only (cm)", "",
+                  markdown_table(["refiner"] + list(families), frows), ""]
+    clean_rows = [[name, c["mpjpe_change_cm"], c["share_changed"]] for name, c in rec["clean"].items()]
+    lines += ["### Clean held-out clips (do no harm)", "",
+              markdown_table(["refiner", "MPJPE change cm", "share of clips changed"], clean_rows), "",
+              f"{rec['seconds']:.0f} s wall."]
+    return "\n".join(lines)
+
+
+def _samples_part(title: str, recogniser: str, rec: dict, accuracy_target: str) -> list[str]:
+    """The markdown lines of one set of samples' :func:`~refiner.evaluation.bench_samples.sample_records`."""
+    g, r = rec["generated"], rec["refined"]
+    rows = [[f"{recogniser} recogniser accuracy %", 100 * g["accuracy"], 100 * r["accuracy"], accuracy_target],
+            ["bone-length variation % (std / mean per bone)", 100 * g["bone_length_variation"],
+             100 * r["bone_length_variation"], "under 1"],
+            ["mean joint acceleration (m/s²)", g["acceleration"], r["acceleration"], ""],
+            ["frames changed % (any step)", "", 100 * rec["frames_changed"], ""],
+            ["frames repaired % (flaw repair only)", "", 100 * rec["repaired_frames"], ""]]
+    return [f"## {title}", "", markdown_table(["figure", "generated", "refined", "target"], rows), "",
+            "Changes by step (over all clips): " + (", ".join(f"{k} {v}" for k, v in rec["changes_by_step"].items())
+                                                  or "none") + ".", "",
+            "First clip's report: " + (json.dumps(rec["reports"][0]["changes"]) if rec["reports"] else "-")]
+
+
+def _samples(rec: dict) -> str:
+    if "skipped" in rec:
+        return f"## Real generator samples\n\n({rec['skipped']}; skipped)"
+    lines = _samples_part(f"Real generator samples (Action2Motion xyz VAE, {len(rec['reports'])} clips, subject-1-10 "
+                          "weights)", "HumanAct12", rec, "at least 85")
+    if "ntu13" in rec:
+        ntu = rec["ntu13"]
+        lines += [""] + _samples_part(f"NTU13 samples (Action2Motion xyz VAE, 18 joints, skeleton 'uestc', "
+                                      f"{ntu['clips']} clips; refined through the HumanAct12 weights with the action "
+                                      "unknown)", "NTU13", ntu, "not lower")
+    else:
+        lines += ["", f"({rec['ntu13_skipped']})"]
+    return "\n".join(lines)
+
+
+def _skeletons(rec: dict) -> str:
+    rows_by = rec["skeletons"]
+    names = list(next(iter(rows_by.values()))["removed_pct"])
+    rows = [[s, r["clean_mpjpe_change_cm"], r["clean_clips_changed"], *[r["removed_pct"][f] for f in names],
+             r["mean_removed_pct"]] for s, r in rows_by.items()]
+    return "\n".join([
+        f"## Skeletons (HumanAct12 subjects 11-12, every {rec['stride']}th clip: {rec['clips']} clips, "
+        "converted to each layout; severity 2; action unknown)", "",
+        "humanact12 has weights of its own; the others are refined through them (`ConvertedRefiner`).", "",
+        markdown_table(["skeleton", "clean: MPJPE change cm", "clean: share of clips changed",
+                        *[f"{f}: % removed" for f in names], "mean % removed"], rows), "",
+        f"{rec['seconds']:.0f} s wall."])
+
+
+#: Suite name -> the Markdown section of its record.
+SECTIONS: dict[str, Callable[[dict], str]] = {
+    "concepts": _concepts,
+    "refiner": _refiner,
+    "speed": _speed,
+    "sanity": _sanity,
+    "flaws": _flaws,
+    "samples": _samples,
+    "skeletons": _skeletons,
+    "generators": _generators,
+}
+
+#: ``(suite, progress event)`` -> the line printed for its payload; events without an entry print nothing.
+PROGRESS: dict[tuple[str, str], Callable[[dict], str]] = {
+    ("concepts", "segmented"): _concepts_segmented,
+    ("concepts", "penalty"): _concepts_penalty,
+    ("refiner", "figures"): _refiner_figures,
+    ("refiner", "latency"): _refiner_latency,
+    ("speed", "device"): _speed_device,
+    ("sanity", "comparison"): _sanity_comparison,
+    ("generators", "row"): _generators_row,
+}

@@ -1,0 +1,69 @@
+"""``motion-refiner bench generators``: the shipped reference generators' samples before and after refinement.
+
+The record (``generators.json``): ``per_action`` (samples per HumanAct12 action), ``n_replications``,
+``reference_clips`` (real clips of subjects 11-12) and ``rows``: per ``<kind>/generated``,
+``<kind>/refined`` and ``real`` (train clips of subjects 1-10), ``samples`` and ``metrics``
+(:func:`~refiner.evaluation.protocol.evaluate` summary, metric -> ``[mean, 95 % half-width]``); refined
+rows also ``frames_changed`` (share), ``flagged_anchors_per_clip`` and ``refine_seconds_per_clip``.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from refiner.evaluation.bench_setup import (
+    Progress,
+    ignore_progress,
+    load_humanact12_and_recognizer,
+    one_thread,
+    summary_record,
+    write_record,
+)
+from refiner.evaluation.protocol import evaluate
+
+__all__ = ["bench_generators"]
+
+
+@one_thread()
+def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
+    """The shipped reference generators' samples before and after refinement, scored by the HumanAct12 recogniser.
+
+    ``quick``: 3 samples per action and 2 replications (else the paper's Table 1 protocol). Progress
+    event ``"row"``: ``kind``, ``label`` (generated or refined) and ``metrics`` of each generator row.
+    """
+    # these import torch: here, so that importing the suites (``motion-refiner --help``) stays cheap
+    from refiner.reference.models import GENERATOR_KINDS, load_reference_generator
+    from refiner.refinement.pipeline import Refiner
+
+    progress = progress or ignore_progress
+    dataset, recognizer = load_humanact12_and_recognizer(data, hidden="random")
+    real = dataset.split("test")
+    refiner = Refiner.pretrained("humanact12", split="train")
+    # the paper's Table 1 protocol: 3,000 samples (250 per action), 20 replications
+    per_action, n_rep = (3, 2) if quick else (250, 20)
+    n_actions = len(dataset.action_names)
+    rec = {"per_action": per_action, "n_replications": n_rep, "reference_clips": len(real), "rows": {}}
+    for kind in GENERATOR_KINDS:
+        gen = load_reference_generator(kind)
+        before = [m for a in range(n_actions)
+                  for m in gen.sample_motions(a, per_action, random_state=1000 * a + 7)]
+        t0 = time.perf_counter()
+        joints, reports = refiner.refine(np.stack([m.joints for m in before]), action=[m.action for m in before],
+                                         return_report=True)
+        seconds = time.perf_counter() - t0
+        after = [m.with_joints(j) for m, j in zip(before, joints)]
+        for label, motions in (("generated", before), ("refined", after)):
+            s = evaluate(recognizer, motions, real.motions, n_replications=n_rep, match_labels=True,
+                         random_state=0).summary()
+            row = rec["rows"][f"{kind}/{label}"] = {"samples": len(motions), "metrics": summary_record(s)}
+            if label == "refined":
+                row.update(frames_changed=float(np.mean([r.changed_frames.mean() for r in reports])),
+                           flagged_anchors_per_clip=float(np.mean([len(r.flagged_anchors) for r in reports])),
+                           refine_seconds_per_clip=seconds / len(before))
+            progress("row", {"kind": kind, "label": label, "metrics": row["metrics"]})
+    s = evaluate(recognizer, dataset.split("train").motions, real.motions, n_replications=n_rep,
+                 n_generated=per_action * n_actions, match_labels=True, random_state=0).summary()
+    rec["rows"]["real"] = {"samples": per_action * n_actions, "metrics": summary_record(s)}
+    return write_record(out, "generators", rec)
