@@ -186,7 +186,7 @@ def confusion_matrix(predictions, labels, n_classes: int) -> np.ndarray:
 
 
 def accuracy(predictions, labels) -> float:
-    """Recognition accuracy: the fraction of clips whose predicted class equals their label.
+    """Action-recognition accuracy: the fraction of clips whose predicted class equals their label.
 
     Parameters
     ----------

@@ -19,7 +19,7 @@ round-trip error and warns when it exceeds ``tol``; ``translations=True`` adds p
 channels holding each bone vector, which makes any motion exact.
 
 No comment syntax is part of BVH, so the skeleton is not written as a note: the joint names are the
-skeleton's own, and :func:`load_bvh` recognises a registered skeleton from them, reorders the joints
+skeleton's own, and :func:`load_bvh` identifies a registered skeleton by them, reorders the joints
 to its order and turns them back into its frame.
 
 Writing is :mod:`refiner.io.bvh_export`, reading :mod:`refiner.io.bvh_import`; their public functions are
