@@ -76,7 +76,7 @@ SOURCES: dict[str, DataSource] = {s.name: s for s in (
 def source_folder(name: str, data_dir: str | os.PathLike | None = None) -> Path:
     """The folder of data source ``name`` under ``data_dir`` (default :func:`refiner.io.datasets.default_data_dir`)."""
     if data_dir is None:
-        from refiner.io.datasets import default_data_dir
+        from refiner.io.datasets import default_data_dir  # here: datasets imports this module
 
         data_dir = default_data_dir()
     return Path(os.path.normpath(Path(data_dir) / SOURCES[name].folder))

@@ -205,7 +205,7 @@ def load_dataset(name: str, path: str | os.PathLike | None = None, *, skeleton: 
     """Load a dataset by name: ``"humanact12"``, ``"cmu_mocap"`` or ``"joints"`` (your own clips at
     ``path``, any registered ``skeleton``: :func:`refiner.io.joints_dataset.load_joints_dataset`)."""
     if name == "joints":
-        from refiner.io.joints_dataset import load_joints_dataset
+        from refiner.io.joints_dataset import load_joints_dataset  # here: joints_dataset imports this module
 
         if path is None:
             raise ValueError("the 'joints' dataset needs a path (--data): a folder of .npy clips with labels.csv, or a .npz.")
