@@ -46,7 +46,7 @@ def train_generator_arguments(p: argparse.ArgumentParser) -> None:
 
 def train_generator_run(args: argparse.Namespace) -> int:
     from refiner.io.datasets import load_dataset
-    from refiner.reference.models import train_reference_generator
+    from refiner.reference import train_reference_generator
 
     _set_threads(args.threads)
     dataset = load_dataset("humanact12", args.data)

@@ -138,7 +138,7 @@ def run_demo(
     from refiner.io import viz
     from refiner.io.datasets import HUMANACT12_ACTIONS
     from refiner.plugins.manager import get_plugin_manager
-    from refiner.reference.models import load_reference_generator
+    from refiner.reference import load_reference_generator
     from refiner.refinement.refined_generator import RefinedGenerator
 
     started = time.perf_counter()

@@ -199,7 +199,7 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool) -> str:
 
 def _bench_generators(dataset, recognizer, real, refiner, per_action: int, n_rep: int, out: Path | None) -> str:
     from refiner.evaluation.metrics import evaluate
-    from refiner.reference.models import GENERATOR_KINDS, load_reference_generator
+    from refiner.reference import GENERATOR_KINDS, load_reference_generator
 
     n_actions = len(dataset.action_names)
     lines = [f"## Reference generators (HumanAct12; {per_action} samples per action, refiner trained on subjects "
