@@ -53,7 +53,7 @@ MOVED = {
     "physics": "evaluation.physics",
     "pipeline": "refinement.pipeline",
     "recognition": "refinement.recognition",
-    "reference_generators": "reference.models",
+    "reference_generators": "reference",
     "repair_candidates": "refinement.repair_candidates",
     "safe_pickle": "core.safe_pickle",
     "segmentation": "concepts.segmentation",
