@@ -90,3 +90,19 @@ def test_only_adapters_import_adapter_modules():
                 elif parts[0] == "adapters" and len(parts) > 1 and parts[1] in ADAPTER_MODULES:
                     bad.append(f"{p.relative_to(REPO)}: {n}")
     assert not bad, bad
+
+
+def test_old_flat_import_paths_give_the_new_module_with_a_deprecation_warning():
+    import importlib
+    import sys
+
+    from refiner.core.moved_modules import MOVED
+
+    for old, new in MOVED.items():
+        sys.modules.pop(f"refiner.{old}", None)
+        with pytest.warns(DeprecationWarning, match=f"refiner.{old} moved to refiner.{new}"):
+            module = importlib.import_module(f"refiner.{old}")
+        assert module is importlib.import_module(f"refiner.{new}")
+    from refiner.pipeline import Refiner  # the names a 0.1 user imported are still there
+
+    assert Refiner is importlib.import_module("refiner").Refiner

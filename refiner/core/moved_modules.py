@@ -24,7 +24,6 @@ MOVED = {
     "bench_samples": "evaluation.bench_samples",
     "bench_skeletons": "evaluation.bench_skeletons",
     "bvh": "io.bvh",
-    "cli": "cli.main",
     "commands": "cli.commands",
     "components": "nn.components",
     "converted_refinement": "refinement.converted_refinement",
