@@ -10,20 +10,18 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from refiner.adapters.base import (
-    AdapterInfo,
-    call_with_options,
-    check_raw,
+from refiner.adapters.conversion import call_with_options, check_raw, recenter as _recenter
+from refiner.adapters.lie_kinematics import (
+    continuous_lie_inverse_kinematics,
     get_lie_kinematics,
     lie_forward_kinematics,
     lie_inverse_kinematics,
-    recenter as _recenter,
     reference_bone_lengths,
 )
 from refiner.core.motion import Motion
-from refiner.plugins import hookimpl
+from refiner.plugins import AdapterInfo, hookimpl
 
-__all__ = ["INFO", "joints_to_lie", "lie_to_joints", "to_motions", "xyz_to_joints"]
+__all__ = ["INFO", "from_motions", "joints_to_lie", "lie_to_joints", "to_motions", "xyz_to_joints"]
 
 INFO = AdapterInfo(
     name="action2motion",
@@ -87,7 +85,7 @@ def lie_to_joints(lie, reference=None, dataset: str = "humanact12", *, recenter:
     return joints.astype(np.float32)
 
 
-def joints_to_lie(joints, dataset: str = "humanact12") -> np.ndarray:
+def joints_to_lie(joints, dataset: str = "humanact12", *, continuous: bool = False) -> np.ndarray:
     """Action2Motion Lie parameters of joint positions (inverse kinematics, §2.2).
 
     Parameters
@@ -95,6 +93,11 @@ def joints_to_lie(joints, dataset: str = "humanact12") -> np.ndarray:
     joints : array-like of shape (T, J, 3) or (N, T, J, 3)
         Metres; J = 24 (humanact12) or 18 (ntu13).
     dataset : {"humanact12", "ntu13"}, default="humanact12"
+    continuous : bool, default=False
+        False: Action2Motion's own inverse kinematics (angles in [0, pi], which jump where a bone
+        turns through pi). True: parameters that change smoothly over time, with norms up to
+        2 pi (:func:`~refiner.adapters.lie_kinematics.continuous_lie_inverse_kinematics`; regression
+        targets for a Lie VAE); they decode to the same joints.
 
     Returns
     -------
@@ -108,6 +111,9 @@ def joints_to_lie(joints, dataset: str = "humanact12") -> np.ndarray:
         raise ValueError(
             f"`joints` must have {kin.n_joints} joints for dataset {dataset!r}; got shape {tuple(x.shape)}."
         )
+    if continuous:  # clip by clip: the choice of each frame's rotation vector follows the previous frame
+        return np.stack([continuous_lie_inverse_kinematics(clip, kin) for clip in x.reshape((-1,) + x.shape[-3:])]
+                        ).reshape(x.shape[:-2] + (3 * kin.n_joints,))
     lie = lie_inverse_kinematics(x, kin)
     return lie.reshape(x.shape[:-2] + (3 * kin.n_joints,)).astype(np.float32)
 
@@ -191,6 +197,37 @@ def to_motions(
     return [Motion(j, skeleton=skeleton, fps=fps, action=None if a is None else int(a)) for j, a in zip(batch, actions)]
 
 
+def from_motions(motions: Sequence[Motion], *, representation: str = "lie", continuous: bool = False) -> list[np.ndarray]:
+    """Canonical motions to Action2Motion's raw per-clip output: the inverse of :func:`to_motions`.
+
+    Parameters
+    ----------
+    motions : sequence of Motion
+        On skeleton ``"humanact12"`` (24 joints) or ``"uestc"`` (the 18 ntu13 joints), metres.
+    representation : {"lie", "xyz"}, default="lie"
+        ``"lie"``: Lie VAE parameters (:func:`joints_to_lie`); ``"xyz"``: xyz VAE joints, flattened.
+    continuous : bool, default=False
+        For ``"lie"``: parameters that change smoothly over time (see :func:`joints_to_lie`).
+
+    Returns
+    -------
+    list of ndarray of shape (T_i, 3 * J), float32
+        One per motion. ``to_motions(out, representation=..., reference=motion.joints[0],
+        recenter=False)`` gives the motion back (Lie: when its bone lengths are constant).
+    """
+    if representation not in ("lie", "xyz"):
+        raise ValueError(f"`representation` must be 'lie' or 'xyz'; got {representation!r}.")
+    out = []
+    for m in motions:
+        if m.skeleton not in _DATASET_OF_SKELETON:
+            raise ValueError(f"action2motion encodes skeletons {sorted(_DATASET_OF_SKELETON)}; got {m.skeleton!r}.")
+        if representation == "lie":
+            out.append(joints_to_lie(m.joints, _DATASET_OF_SKELETON[m.skeleton], continuous=continuous))
+        else:
+            out.append(m.joints.reshape(m.n_frames, -1).astype(np.float32))
+    return out
+
+
 def _bone_lengths(reference, kin, lie: np.ndarray) -> np.ndarray:
     """Per-joint bone lengths ``(J,)`` or ``(N, 1, J)`` from a reference pose, Motion or the default table."""
     if reference is None:
@@ -221,10 +258,10 @@ def refiner_adapter_info() -> AdapterInfo:
 
 
 @hookimpl
-def refiner_convert_output(adapter: str, output: Any, skeleton: str | None, options: Mapping[str, Any]):
-    if adapter != INFO.name:
-        return None
-    opts = dict(options)
-    if skeleton is not None:
-        opts["skeleton"] = skeleton
-    return call_with_options(to_motions, output, opts, adapter=INFO.name)
+def refiner_convert_output(output: Any, skeleton: str | None, options: Mapping[str, Any]) -> list[Motion]:
+    return call_with_options(to_motions, output, options, adapter=INFO.name, skeleton=skeleton)
+
+
+@hookimpl
+def refiner_encode_motions(motions: list[Motion], options: Mapping[str, Any]) -> list[np.ndarray]:
+    return call_with_options(from_motions, motions, options, adapter=INFO.name)

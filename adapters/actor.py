@@ -18,11 +18,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from refiner.adapters.base import AdapterInfo, call_with_options, check_raw, resolve_path, rot6d_to_rotmat
+from refiner.adapters.conversion import call_with_options, check_raw, resolve_path
 from refiner.core.motion import Motion
+from refiner.core.rotations import rot6d_to_rotmat
 from refiner.core.safe_pickle import load_pickle
 from refiner.core.validation import to_numpy
-from refiner.plugins import hookimpl
+from refiner.plugins import AdapterInfo, hookimpl
 
 __all__ = [
     "A2M_JOINTS",
@@ -85,7 +86,7 @@ def load_smpl(smpl_path=None):
 @functools.lru_cache(maxsize=4)
 def _load_smpl_cached(path: str, mtime_ns: int, size: int):
     """Build the layer once per file version (the cache key includes mtime and size)."""
-    import smplx
+    import smplx  # only when an SMPL file is used: smplx (and torch under it) stay out of plugin discovery
     from smplx.utils import Struct
 
     data = _read_smpl_arrays(path)
@@ -261,7 +262,7 @@ def _load_j_regressor_extra(value, smpl_path, layer) -> np.ndarray:
 
 def _smpl_joints(layer, rotmats: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
     """SMPL joints ``(F, 24, 3)``, or the 18 ``a2m`` joints when ``extra`` is given, for ``(F, 24, 3, 3)`` rotations."""
-    import torch
+    import torch  # here, not at the top: registering the built-in plugins must not import torch
 
     out = []
     with torch.no_grad():
@@ -297,10 +298,10 @@ def refiner_recognize_generator(generator: Any) -> str | None:
 
 
 @hookimpl
-def refiner_sample_generator(adapter: str, generator: Any, action: Any, n: int, options: Mapping[str, Any]):
-    if adapter != INFO.name or not _is_actor_model(generator):
-        return None
-    import torch
+def refiner_sample_generator(generator: Any, action: Any, n: int, options: Mapping[str, Any]):
+    if not _is_actor_model(generator):
+        return None  # RefinedGenerator then calls generator.sample / generator itself
+    import torch  # an ACTOR model was passed, so torch is loaded already; not imported at plugin discovery
 
     if isinstance(action, bool) or not isinstance(action, (int, np.integer)):
         raise ValueError(f"ACTOR needs an integer action index; got {action!r}.")
@@ -313,10 +314,5 @@ def refiner_sample_generator(adapter: str, generator: Any, action: Any, n: int, 
 
 
 @hookimpl
-def refiner_convert_output(adapter: str, output: Any, skeleton: str | None, options: Mapping[str, Any]):
-    if adapter != INFO.name:
-        return None
-    opts = dict(options)
-    if skeleton is not None:
-        opts["skeleton"] = skeleton
-    return call_with_options(to_motions, output, opts, adapter=INFO.name)
+def refiner_convert_output(output: Any, skeleton: str | None, options: Mapping[str, Any]) -> list[Motion]:
+    return call_with_options(to_motions, output, options, adapter=INFO.name, skeleton=skeleton)

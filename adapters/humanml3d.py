@@ -7,12 +7,13 @@ and 18-joint NTU-VIBE / UESTC (§7.2) skeletons.
 from __future__ import annotations
 
 import os
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from refiner.adapters.base import call_with_options, check_raw, recenter, yup_to_ydown
+from refiner.adapters.conversion import call_with_options, check_raw, recenter
 from refiner.core.motion import Motion
+from refiner.core.rotations import yup_to_ydown
 from refiner.core.skeleton_conversion import HAND_LENGTH, add_hands, convert
 from refiner.core.validation import to_numpy
 
@@ -212,12 +213,14 @@ def features_to_motions(
     std=None,
     denormalized: bool = False,
     lengths: Sequence[int] | None = None,
-    skeleton: str = "humanact12",
+    skeleton: str | None = None,
     hand_length: float = HAND_LENGTH,
     actions: Sequence[int | None] | None = None,
     fps: float = 20.0,
 ) -> list[Motion]:
     """HumanML3D features of a text-to-motion generator to canonical :class:`~refiner.Motion` s.
+
+    The converter of the ``motiondiffuse`` and ``mogents`` adapters.
 
     Parameters
     ----------
@@ -229,7 +232,8 @@ def features_to_motions(
         The features are already ``x * std + mean`` (e.g. MoGenTS ``*_data.npy``).
     lengths : sequence of int, optional
         Valid frames per clip (padded batches).
-    skeleton : {"humanact12", "uestc"}, default="humanact12"
+    skeleton : {"humanact12", "uestc"}, optional
+        Default (None): ``"humanact12"``.
     hand_length : float, default=0.08
         Metres, for the 24-joint hands.
     actions : sequence of int or None, optional
@@ -240,6 +244,7 @@ def features_to_motions(
     list of Motion
         y down, facing -z, frame-0 root at the origin.
     """
+    skeleton = "humanact12" if skeleton is None else skeleton
     if skeleton not in ("humanact12", "uestc"):
         raise ValueError(f"`skeleton` must be 'humanact12' or 'uestc' for HumanML3D features; got {skeleton!r}.")
     clips = _split_clips(output, lengths, "output")
@@ -258,25 +263,17 @@ def features_to_motions(
 
 
 def convert_output(
-    to_motions: Callable[..., list[Motion]],
-    output: Any,
-    *,
-    adapter: str,
-    generator: Any,
-    skeleton: str | None,
-    options: Mapping[str, Any],
+    output: Any, *, adapter: str, generator: Any, skeleton: str | None, options: Mapping[str, Any]
 ) -> list[Motion]:
-    """Body of the ``refiner_convert_output`` hooks of the HumanML3D adapters.
+    """Body of the ``refiner_convert_output`` hooks of the HumanML3D adapters: :func:`features_to_motions`.
 
     Adds the target ``skeleton`` to the options and, unless given or ``denormalized``, takes
     ``mean`` / ``std`` from attributes of the same names on the generator (a wrapped sampler may
-    carry its checkpoint statistics).
+    carry its checkpoint statistics); unknown options raise ``ValueError`` naming ``adapter``.
     """
     opts = dict(options)
-    if skeleton is not None:
-        opts["skeleton"] = skeleton
     if not opts.get("denormalized"):
         for stat in ("mean", "std"):
             if stat not in opts and getattr(generator, stat, None) is not None:
                 opts[stat] = getattr(generator, stat)
-    return call_with_options(to_motions, output, opts, adapter=adapter)
+    return call_with_options(features_to_motions, output, opts, adapter=adapter, skeleton=skeleton)

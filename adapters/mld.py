@@ -6,14 +6,14 @@ reshaping, conversion is the ACTOR path (SMPL ``jointstype="smpl"``, ``vertstran
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
 import numpy as np
 
 from refiner.adapters import actor
-from refiner.adapters.base import AdapterInfo, call_with_options, check_raw
+from refiner.adapters.conversion import call_with_options, check_raw
 from refiner.core.motion import Motion
-from refiner.plugins import hookimpl
+from refiner.plugins import AdapterInfo, hookimpl
 
 __all__ = ["INFO", "actor_to_features", "features_to_actor", "to_motions"]
 
@@ -50,27 +50,14 @@ def actor_to_features(output) -> np.ndarray:
     return x.transpose(0, 3, 2, 1).reshape(x.shape[0], x.shape[3], 150).astype(np.float32)
 
 
-def to_motions(
-    output: Any,
-    *,
-    mask=None,
-    lengths: Sequence[int] | None = None,
-    skeleton: str | None = None,
-    smpl_path=None,
-    j_regressor_extra=None,
-    vertstrans: bool = True,
-    actions: Sequence[int | None] | None = None,
-    fps: float = 20.0,
-) -> list[Motion]:
+def to_motions(output: Any, **options: Any) -> list[Motion]:
     """MLD features ``(B, T, 150)`` (``m_rst``) to canonical motions through SMPL.
 
-    Parameters are those of :func:`refiner.adapters.actor.rot6d_to_joints`; ``mask`` (B, T) or
-    ``lengths`` (B,) select the valid frames of padded batches.
+    :func:`features_to_actor`, then :func:`refiner.adapters.actor.to_motions` with the same keyword
+    options (``mask`` (B, T) or ``lengths`` (B,) select the valid frames of padded batches;
+    ``skeleton``, ``smpl_path``, ``j_regressor_extra``, ``vertstrans``, ``actions``, ``fps``).
     """
-    return actor.to_motions(
-        features_to_actor(output), mask=mask, lengths=lengths, skeleton=skeleton, smpl_path=smpl_path,
-        j_regressor_extra=j_regressor_extra, vertstrans=vertstrans, actions=actions, fps=fps,
-    )
+    return actor.to_motions(features_to_actor(output), **options)
 
 
 # --- plugin hooks ------------------------------------------------------------------------------
@@ -82,10 +69,6 @@ def refiner_adapter_info() -> AdapterInfo:
 
 
 @hookimpl
-def refiner_convert_output(adapter: str, output: Any, skeleton: str | None, options: Mapping[str, Any]):
-    if adapter != INFO.name:
-        return None
-    opts = dict(options)
-    if skeleton is not None:
-        opts["skeleton"] = skeleton
-    return call_with_options(to_motions, output, opts, adapter=INFO.name)
+def refiner_convert_output(output: Any, skeleton: str | None, options: Mapping[str, Any]) -> list[Motion]:
+    # the options are ACTOR's: check them against its converter, then convert the reshaped features
+    return call_with_options(actor.to_motions, features_to_actor(output), options, adapter=INFO.name, skeleton=skeleton)

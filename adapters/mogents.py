@@ -6,14 +6,13 @@ features (pass ``denormalized=True``); the ``joints/*.npy`` files are IK-refitte
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
-from refiner.adapters.base import AdapterInfo
-from refiner.adapters.humanml3d import HAND_LENGTH, convert_output, features_to_motions
+from refiner.adapters.humanml3d import convert_output, features_to_motions
 from refiner.core.motion import Motion
-from refiner.plugins import hookimpl
+from refiner.plugins import AdapterInfo, hookimpl
 
-__all__ = ["INFO", "to_motions"]
+__all__ = ["INFO", "decoder_output", "to_motions"]
 
 INFO = AdapterInfo(
     name="mogents",
@@ -28,28 +27,19 @@ INFO = AdapterInfo(
 )
 
 
-def to_motions(
-    output: Any,
-    *,
-    mean=None,
-    std=None,
-    denormalized: bool = False,
-    lengths: Sequence[int] | None = None,
-    skeleton: str | None = None,
-    hand_length: float = HAND_LENGTH,
-    actions: Sequence[int | None] | None = None,
-    fps: float = 20.0,
-) -> list[Motion]:
-    """MoGenTS output to canonical motions; see :func:`refiner.adapters.humanml3d.features_to_motions`.
-
-    A 2-tuple ``(x_out1d, x_out2d)`` is taken as the decoder's pair and ``x_out2d`` is used.
-    """
+def decoder_output(output: Any) -> Any:
+    """``x_out2d`` of the decoder's ``(x_out1d, x_out2d)`` pair (a 2-tuple of 3-D arrays); anything else as given."""
     if isinstance(output, tuple) and len(output) == 2 and all(getattr(o, "ndim", 0) == 3 for o in output):
-        output = output[1]
-    return features_to_motions(
-        output, mean=mean, std=std, denormalized=denormalized, lengths=lengths,
-        skeleton=skeleton or "humanact12", hand_length=hand_length, actions=actions, fps=fps,
-    )
+        return output[1]
+    return output
+
+
+def to_motions(output: Any, **options: Any) -> list[Motion]:
+    """MoGenTS output to canonical motions: :func:`decoder_output`, then
+    :func:`refiner.adapters.humanml3d.features_to_motions` with the same keyword options
+    (``mean``, ``std``, ``denormalized``, ``lengths``, ``skeleton``, ``hand_length``, ``actions``, ``fps``).
+    """
+    return features_to_motions(decoder_output(output), **options)
 
 
 # --- plugin hooks ------------------------------------------------------------------------------
@@ -61,8 +51,6 @@ def refiner_adapter_info() -> AdapterInfo:
 
 
 @hookimpl
-def refiner_convert_output(adapter: str, output: Any, generator: Any, skeleton: str | None, options: Mapping[str, Any]):
-    if adapter != INFO.name:
-        return None
-    return convert_output(to_motions, output, adapter=INFO.name, generator=generator, skeleton=skeleton,
+def refiner_convert_output(output: Any, generator: Any, skeleton: str | None, options: Mapping[str, Any]) -> list[Motion]:
+    return convert_output(decoder_output(output), adapter=INFO.name, generator=generator, skeleton=skeleton,
                           options=options)

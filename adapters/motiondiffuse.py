@@ -2,16 +2,18 @@
 
 ``DDPMTrainer.generate`` returns a list of (T_b, 263) tensors padded to the batch maximum; they are
 de-normalised with the checkpoint's ``meta/mean.npy`` and ``meta/std.npy``, decoded with
-``recover_from_ric`` and mapped onto HumanAct12 (24 joints) or UESTC (18 joints).
+``recover_from_ric`` and mapped onto HumanAct12 (24 joints) or UESTC (18 joints). The converter is
+the shared HumanML3D one: ``to_motions`` is :func:`refiner.adapters.humanml3d.features_to_motions`
+(``mean`` / ``std`` are required unless ``denormalized``; the visualiser's saved ``*.npy`` joints
+are smoothed and not accepted: use the raw features).
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
-from refiner.adapters.base import AdapterInfo
-from refiner.adapters.humanml3d import HAND_LENGTH, convert_output, features_to_motions
+from refiner.adapters.humanml3d import convert_output, features_to_motions as to_motions
 from refiner.core.motion import Motion
-from refiner.plugins import hookimpl
+from refiner.plugins import AdapterInfo, hookimpl
 
 __all__ = ["INFO", "to_motions"]
 
@@ -28,30 +30,6 @@ INFO = AdapterInfo(
 )
 
 
-def to_motions(
-    output: Any,
-    *,
-    mean=None,
-    std=None,
-    denormalized: bool = False,
-    lengths: Sequence[int] | None = None,
-    skeleton: str | None = None,
-    hand_length: float = HAND_LENGTH,
-    actions: Sequence[int | None] | None = None,
-    fps: float = 20.0,
-) -> list[Motion]:
-    """MotionDiffuse output to canonical motions; see :func:`refiner.adapters.humanml3d.features_to_motions`.
-
-    ``mean`` and ``std`` (arrays of shape (263,) or ``.npy`` paths) are required unless
-    ``denormalized``; missing ones raise ``ValueError``. Saved ``*.npy`` joints of the visualiser
-    are smoothed and not accepted: use the raw features.
-    """
-    return features_to_motions(
-        output, mean=mean, std=std, denormalized=denormalized, lengths=lengths,
-        skeleton=skeleton or "humanact12", hand_length=hand_length, actions=actions, fps=fps,
-    )
-
-
 # --- plugin hooks ------------------------------------------------------------------------------
 
 
@@ -61,8 +39,5 @@ def refiner_adapter_info() -> AdapterInfo:
 
 
 @hookimpl
-def refiner_convert_output(adapter: str, output: Any, generator: Any, skeleton: str | None, options: Mapping[str, Any]):
-    if adapter != INFO.name:
-        return None
-    return convert_output(to_motions, output, adapter=INFO.name, generator=generator, skeleton=skeleton,
-                          options=options)
+def refiner_convert_output(output: Any, generator: Any, skeleton: str | None, options: Mapping[str, Any]) -> list[Motion]:
+    return convert_output(output, adapter=INFO.name, generator=generator, skeleton=skeleton, options=options)

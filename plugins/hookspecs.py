@@ -2,8 +2,10 @@
 
 Hooks are called by refiner itself, always with keyword arguments. A plugin implements any subset
 with ``@refiner.plugins.hookimpl`` and may accept fewer arguments than a spec lists; the built-in
-adapters in ``refiner.adapters`` are plugins like any other. Arguments are only ever added to these
-specs, never renamed or removed.
+adapters in ``refiner.adapters`` are plugins like any other. The hooks that take an ``adapter`` name
+are called only on the plugin that registered that adapter, so a plugin never has to check the name
+(one that still does keeps working). Arguments are only ever added to these specs, never renamed or
+removed.
 """
 from __future__ import annotations
 
@@ -12,13 +14,14 @@ from typing import TYPE_CHECKING, Any, Mapping
 import pluggy
 
 if TYPE_CHECKING:
-    from refiner.adapters.base import AdapterInfo
     from refiner.core.motion import Motion
+    from refiner.plugins.adapter_info import AdapterInfo
 
 __all__ = [
     "hookspec",
     "refiner_adapter_info",
     "refiner_convert_output",
+    "refiner_encode_motions",
     "refiner_recognize_generator",
     "refiner_sample_generator",
 ]
@@ -76,15 +79,15 @@ def refiner_recognize_generator(generator: Any) -> str | None:
 def refiner_sample_generator(adapter: str, generator: Any, action: Any, n: int, options: Mapping[str, Any]) -> Any:
     """Run *generator*'s own sampling API and return its raw output.
 
-    Called by :meth:`refiner.RefinedGenerator.sample` before conversion. Implement it when the
+    Called by :meth:`refiner.RefinedGenerator.sample` (through ``PluginManager.sample``) before
+    conversion, on the plugin that registered the generator's adapter only. Implement it when the
     generator's API is not ``generator.sample(action, n=n, **options)`` or
-    ``generator(action, n=n, **options)``, which RefinedGenerator uses when every plugin
-    returns None.
+    ``generator(action, n=n, **options)``, which RefinedGenerator uses when this hook returns None.
 
     Parameters
     ----------
     adapter : str
-        The adapter chosen for this generator; return None unless it is yours.
+        The adapter chosen for this generator: always one your ``refiner_adapter_info`` declares.
     generator : object
         The user's generator.
     action : int or str
@@ -108,14 +111,14 @@ def refiner_convert_output(
 ) -> list[Motion] | None:
     """Convert raw generator output into canonical motions.
 
-    Called by ``PluginManager.convert`` / :func:`refiner.plugins.manager.convert` and by
-    :meth:`refiner.RefinedGenerator.sample` after sampling.
+    Called by ``PluginManager.convert`` / :func:`refiner.plugins.manager.convert` (the CLI's
+    ``--adapter``, the benchmarks, the reference generators' ``to_motions``) and by
+    :meth:`refiner.RefinedGenerator.sample` after sampling, on the plugin that registered *adapter* only.
 
     Parameters
     ----------
     adapter : str
-        Adapter name requested; return None unless it is the name your ``refiner_adapter_info``
-        declares.
+        Adapter name requested: always the name your ``refiner_adapter_info`` declares.
     output : object
         Raw output exactly as the generator produced it (arrays, tensors, dicts, lists);
         never modify it.
@@ -135,4 +138,34 @@ def refiner_convert_output(
         (metres; y down and facing -z for HumanAct12 / UESTC; first-frame root at the origin unless
         your format documents otherwise). Stops at the first non-None result. Raise ``ValueError``
         for output of the wrong shape or missing side information.
+    """
+
+
+@hookspec(firstresult=True)
+def refiner_encode_motions(adapter: str, motions: list[Motion], options: Mapping[str, Any]) -> list[Any] | None:
+    """Convert canonical motions into the generator's raw representation: the inverse of ``refiner_convert_output``.
+
+    Called by ``PluginManager.encode`` / :func:`refiner.plugins.manager.encode`, on the plugin that
+    registered *adapter* only; the reference generators (:mod:`refiner.reference`) use it to turn real
+    clips into training targets in a generator's own representation (Action2Motion's Lie parameters).
+    Optional: implement it when your raw format can be computed from joint positions.
+
+    Parameters
+    ----------
+    adapter : str
+        Adapter name requested: always the name your ``refiner_adapter_info`` declares.
+    motions : list of Motion
+        Canonical motions, each on one of your ``AdapterInfo.skeletons`` (the manager checks);
+        never modify them.
+    options : mapping
+        Adapter-specific keyword options (e.g. ``representation``). Raise ``ValueError`` naming
+        any option you do not accept.
+
+    Returns
+    -------
+    list or None
+        One raw output per motion, in order, each in the single-clip layout your
+        ``refiner_convert_output`` accepts (so converting it back gives the motion again, up to
+        what the representation cannot hold). Stops at the first non-None result; None means the
+        plugin does not encode. Raise ``ValueError`` for motions you cannot encode.
     """

@@ -1,5 +1,10 @@
 """The plugin manager: hook specs, built-in adapters, entry-point plugins and adapter look-ups.
 
+Built-in adapters are listed by module name (:data:`BUILTIN_ADAPTERS`, like pytest's
+``default_plugins``), imported with importlib and registered exactly like entry-point plugins, so this
+module never imports an adapter. Every conversion hook is called on the one plugin that registered the
+requested adapter (``subset_hook_caller``), so plugins need not check the adapter name.
+
 Plugins are isolated from each other: one that fails to import, fails pluggy's validation,
 implements a misspelled hook or raises while describing itself is skipped with an
 :class:`AdapterPluginWarning` naming it, and the others keep working.
@@ -10,56 +15,40 @@ import importlib
 import importlib.metadata
 import os
 import warnings
-from typing import TYPE_CHECKING, Any, Callable, Mapping
+from dataclasses import replace
+from typing import Any, Callable, Mapping, Sequence
 
 import pluggy
 
+from refiner.core.motion import Motion
+from refiner.core.skeletons import list_skeletons
 from refiner.plugins import PROJECT_NAME, hookspecs
-
-if TYPE_CHECKING:
-    from refiner.adapters.base import AdapterInfo
-    from refiner.core.motion import Motion
+from refiner.plugins.adapter_info import AdapterInfo
+from refiner.plugins.errors import AdapterPluginError, AdapterPluginWarning
 
 __all__ = [
     "AdapterPluginError",
     "AdapterPluginWarning",
+    "BUILTIN_ADAPTERS",
+    "BUILTIN_PACKAGE",
     "DISABLE_AUTOLOAD_ENV",
     "ENTRY_POINT_GROUP",
     "PluginManager",
     "convert",
+    "encode",
     "get_adapter",
     "get_plugin_manager",
     "list_adapters",
 ]
 
+#: Built-in adapter plugins, in registration order: each is the module ``BUILTIN_PACKAGE + "." + name``,
+#: registered under ``name`` (= its adapter name = its entry-point name).
+BUILTIN_ADAPTERS: tuple[str, ...] = ("action2motion", "actor", "mld", "motiondiffuse", "mogents")
+BUILTIN_PACKAGE = "refiner.adapters"
 ENTRY_POINT_GROUP = "motion_refiner.adapters"
 #: Set (to anything non-empty) to skip entry-point plugins, like ``PYTEST_DISABLE_PLUGIN_AUTOLOAD``.
 DISABLE_AUTOLOAD_ENV = "MOTION_REFINER_DISABLE_PLUGIN_AUTOLOAD"
 BUILTIN_SOURCE = "built-in"
-
-
-class AdapterPluginWarning(UserWarning):
-    """A plugin was skipped or misbehaved; the message names it."""
-
-
-class AdapterPluginError(ValueError):
-    """A plugin's ``refiner_convert_output`` or ``refiner_sample_generator`` raised.
-
-    The message names the plugin, where it comes from, the hook and the adapter, then the original
-    error (kept as ``__cause__``). A ``ValueError`` subclass, so the CLI reports it in one line and
-    callers catching ``ValueError`` for bad generator output are covered.
-
-    Attributes
-    ----------
-    plugin : str
-        The plugin's registered name.
-    hook : str
-        The hook that raised.
-    """
-
-    def __init__(self, message: str, *, plugin: str, hook: str):
-        super().__init__(message)
-        self.plugin, self.hook = plugin, hook
 
 
 class PluginManager(pluggy.PluginManager):
@@ -79,8 +68,6 @@ class PluginManager(pluggy.PluginManager):
 
     def adapters(self) -> dict[str, AdapterInfo]:
         """Every registered adapter by name, sorted, with ``source`` filled in."""
-        from dataclasses import replace
-
         infos = {}
         for impl in self.hook.refiner_adapter_info.get_hookimpls():
             info = _call_isolated(impl, {}, "refiner_adapter_info")
@@ -90,7 +77,7 @@ class PluginManager(pluggy.PluginManager):
         return dict(sorted(infos.items()))
 
     def get_adapter(self, name: str) -> AdapterInfo:
-        """The :class:`~refiner.adapters.base.AdapterInfo` of adapter *name*.
+        """The :class:`~refiner.plugins.AdapterInfo` of adapter *name*.
 
         Raises
         ------
@@ -176,8 +163,6 @@ class PluginManager(pluggy.PluginManager):
             Unknown adapter, a skeleton the adapter cannot produce, or whatever the adapter
             rejects in *output* / *options* (an :class:`AdapterPluginError` naming the plugin).
         """
-        from refiner.core.motion import Motion
-
         info = self.get_adapter(adapter)
         if skeleton is not None and skeleton not in info.skeletons:
             raise ValueError(
@@ -194,6 +179,38 @@ class PluginManager(pluggy.PluginManager):
             kinds = sorted({type(m).__name__ for m in motions})
             raise TypeError(f"adapter {adapter!r} ({info.source}) must return Motion objects; got {', '.join(kinds)}.")
         return motions
+
+    def encode(self, adapter: str, motions: Sequence[Motion], *, options: Mapping[str, Any] | None = None) -> list:
+        """Raw generator output of *motions* in adapter *adapter*'s representation (the inverse of :meth:`convert`).
+
+        Returns
+        -------
+        list
+            One raw array per motion, as the plugin's ``refiner_encode_motions`` returns it.
+
+        Raises
+        ------
+        ValueError
+            Unknown adapter, not Motion objects or a skeleton the adapter does not produce, an adapter
+            without ``refiner_encode_motions``, or whatever the adapter rejects (an :class:`AdapterPluginError`).
+        """
+        info = self.get_adapter(adapter)
+        motions = [motions] if isinstance(motions, Motion) else list(motions)
+        if not all(isinstance(m, Motion) for m in motions):
+            kinds = sorted({type(m).__name__ for m in motions})
+            raise ValueError(f"`motions` must be Motion objects; got {', '.join(kinds)}.")
+        foreign = sorted({m.skeleton for m in motions} - set(info.skeletons))
+        if foreign:
+            raise ValueError(f"adapter {adapter!r} cannot encode skeleton(s) {', '.join(foreign)}; it handles: "
+                             f"{', '.join(info.skeletons)}.")
+        raw = self._call_owner("refiner_encode_motions", adapter=adapter, motions=motions, options=dict(options or {}))
+        if raw is None:
+            raise ValueError(f"adapter {adapter!r} ({info.source}) does not implement refiner_encode_motions.")
+        raw = list(raw)
+        if len(raw) != len(motions):
+            raise TypeError(f"adapter {adapter!r} ({info.source}) must return one output per motion "
+                            f"({len(motions)}); got {len(raw)}.")
+        return raw
 
     def _owner(self, adapter: str, *, exclude: object = None) -> str | None:
         """The name of the plugin whose ``refiner_adapter_info`` names *adapter* (other than *exclude*)."""
@@ -221,7 +238,7 @@ class PluginManager(pluggy.PluginManager):
 def get_plugin_manager(autoload: bool = True) -> PluginManager:
     """A plugin manager with the hook specs, the built-in adapters and installed plugins.
 
-    In order: built-in modules named in ``refiner.adapters.BUILTIN_ADAPTERS`` are registered
+    In order: the built-in modules named in :data:`BUILTIN_ADAPTERS` are imported by name and registered
     under their names; then plugins of the ``motion_refiner.adapters`` entry-point group are
     loaded (skipping names already registered, so built-ins listed there too are harmless),
     unless ``autoload`` is False or ``$MOTION_REFINER_DISABLE_PLUGIN_AUTOLOAD`` is set; finally
@@ -237,11 +254,9 @@ def get_plugin_manager(autoload: bool = True) -> PluginManager:
     -------
     PluginManager
     """
-    from refiner.adapters import BUILTIN_ADAPTERS
-
     pm = PluginManager()
     for name in BUILTIN_ADAPTERS:
-        module = f"refiner.adapters.{name}"
+        module = f"{BUILTIN_PACKAGE}.{name}"
         _add_plugin(pm, name, lambda module=module: importlib.import_module(module), BUILTIN_SOURCE)
     if autoload and not os.environ.get(DISABLE_AUTOLOAD_ENV):
         _load_entry_points(pm)
@@ -280,6 +295,20 @@ def convert(
     return (pm or get_plugin_manager()).convert(adapter, output, generator=generator, skeleton=skeleton, options=options)
 
 
+def encode(adapter: str, motions: Sequence[Motion], *, pm: PluginManager | None = None, **options: Any) -> list:
+    """Raw output of *motions* in the named adapter's representation (the inverse of :func:`convert`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from refiner.core.motion import Motion
+    >>> lie = encode("action2motion", [Motion(np.zeros((60, 24, 3)))], representation="lie")
+    >>> lie[0].shape
+    (60, 72)
+    """
+    return (pm or get_plugin_manager()).encode(adapter, motions, options=options)
+
+
 # --- private helpers -----------------------------------------------------------------------------
 
 
@@ -311,9 +340,6 @@ def _add_plugin(pm: PluginManager, name: str, load: Callable[[], object], source
 def _validate(pm: PluginManager, plugin: object, name: str) -> str | None:
     """Why *plugin* cannot be used (misspelled hook, bad adapter info), or None; taken names are refused by
     :meth:`PluginManager.register`."""
-    from refiner.adapters.base import AdapterInfo
-    from refiner.core.skeletons import list_skeletons
-
     for caller in pm.get_hookcallers(plugin) or []:
         if not caller.has_spec() and any(
             impl.plugin is plugin and not impl.optionalhook for impl in caller.get_hookimpls()
@@ -342,11 +368,8 @@ def _call_isolated(impl, kwargs: dict, hook: str, *, expect: str | None = "Adapt
         if not quiet:
             _warn(f"motion-refiner plugin {impl.plugin_name!r}: {hook} raised {type(e).__name__}: {e}")
         return None
-    if expect == "AdapterInfo":
-        from refiner.adapters.base import AdapterInfo
-
-        if not isinstance(result, AdapterInfo):
-            return None
+    if expect == "AdapterInfo" and not isinstance(result, AdapterInfo):
+        return None
     return result
 
 

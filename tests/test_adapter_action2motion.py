@@ -6,7 +6,7 @@ import pytest
 from conftest import shared_dir
 
 from refiner.adapters import action2motion as a2m
-from refiner.adapters.base import LIE_KINEMATICS, reference_bone_lengths
+from refiner.adapters.lie_kinematics import LIE_KINEMATICS, reference_bone_lengths
 from refiner.core.motion import Motion
 from refiner.core.skeletons import get_skeleton
 
@@ -39,6 +39,25 @@ def test_lie_ik_then_fk_reproduces_real_humanact12_joints(humanact12):
         np.testing.assert_array_equal(clip, before)  # input untouched
         # the Lie parameters stay in Action2Motion's tanh*pi range
         assert np.abs(lie[:, 3:]).max() <= np.pi + 1e-6
+
+
+@pytest.mark.real_data
+def test_from_motions_is_the_inverse_of_to_motions(humanact12):
+    """Encoding real clips (Lie, plain or continuous over time, and xyz) and decoding them gives them back."""
+    motions = [humanact12.motions[i] for i in range(0, 1191, 40)]
+    jumps = {}
+    for continuous in (False, True):
+        lies = a2m.from_motions(motions, continuous=continuous)
+        for m, lie in zip(motions, lies):
+            assert lie.shape == (m.n_frames, 72) and lie.dtype == np.float32
+            back = a2m.to_motions(lie, representation="lie", reference=m.joints[0], recenter=False)[0]
+            assert np.abs(back.joints - m.joints).max() < 1e-4
+        jumps[continuous] = sum(int((np.abs(np.diff(lie[:, 3:], axis=0)) > 1.0).sum()) for lie in lies)
+    assert jumps[True] < 0.3 * jumps[False]  # steps over 1 rad: mostly gone
+    xyz = a2m.from_motions(motions[:1], representation="xyz")[0]
+    np.testing.assert_array_equal(a2m.to_motions(xyz, representation="xyz")[0].joints, motions[0].joints)
+    with pytest.raises(ValueError, match="`representation` must be 'lie' or 'xyz'"):
+        a2m.from_motions(motions[:1], representation="rot6d")
 
 
 def test_lie_round_trip_on_ntu_layout(rng):

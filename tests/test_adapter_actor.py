@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from refiner.adapters import actor
 from refiner.adapters.action2motion import lie_to_joints
-from refiner.adapters.base import rot6d_to_rotmat, rotmat_to_rot6d
+from refiner.core.rotations import rot6d_to_rotmat, rotmat_to_rot6d
 
 SMPL_PARENTS = np.array([-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21])
 N_VERTS = 6890  # smplx picks keypoints up to vertex 6787, so the stand-in keeps SMPL's vertex count

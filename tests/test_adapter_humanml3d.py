@@ -6,7 +6,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from refiner.adapters import humanml3d as h3d
-from refiner.adapters.base import yup_to_ydown
+from refiner.core.rotations import yup_to_ydown
 
 
 def yup_clip(motion):

@@ -6,7 +6,7 @@ import pytest
 
 from refiner.adapters import humanml3d as h3d
 from refiner.adapters import motiondiffuse
-from refiner.adapters.base import yup_to_ydown
+from refiner.core.rotations import yup_to_ydown
 
 
 def normalised_batch(humanact12, rng, indices=(5, 700)):

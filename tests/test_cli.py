@@ -91,7 +91,7 @@ def test_bench_refiner_and_speed_quick(tmp_path, humanact12):
 @pytest.mark.slow
 def test_bench_generators_quick(tmp_path):
     """3 samples per action from each reference generator, before and after refinement, and real clips."""
-    from refiner.reference.models import GENERATOR_KINDS
+    from refiner.reference import GENERATOR_KINDS
 
     rec = bench_json("generators", tmp_path)
     assert rec["per_action"] == 3 and rec["n_replications"] == 2 and rec["reference_clips"] > 0

@@ -12,13 +12,16 @@ SUBPACKAGES = ("core", "nn", "concepts", "refinement", "evaluation", "reference"
 ALLOWED = {
     "core": set(),
     "nn": {"core"},
-    "concepts": {"core", "nn", "io"},
     "io": {"core"},
-    "refinement": {"core", "nn", "concepts", "io"},
-    "evaluation": {"core", "nn", "concepts", "io", "refinement", "reference"},
-    "reference": {"core", "nn", "io"},
-    "cli": set(SUBPACKAGES),
+    "concepts": {"core", "nn", "io"},
+    "refinement": {"core", "nn", "concepts", "io", "plugins"},
+    "reference": {"core", "nn", "io", "plugins"},
+    "evaluation": {"core", "nn", "concepts", "io", "refinement", "reference", "plugins"},
+    "cli": set(SUBPACKAGES) | {"plugins"},
+    "plugins": {"core"},
+    "adapters": {"core", "plugins"},
 }
+LAYERS = SUBPACKAGES + ("plugins", "adapters")
 ADAPTER_MODULES = {p.stem for p in (REPO / "adapters").glob("*.py")} - {"__init__"}
 
 
@@ -54,15 +57,19 @@ def test_every_refiner_module_sits_in_a_subpackage():
     assert {p.name for p in (REPO / "refiner").iterdir() if p.is_dir() and (p / "__init__.py").is_file()} == set(SUBPACKAGES)
 
 
-@pytest.mark.parametrize("package", SUBPACKAGES)
-def test_subpackage_imports_follow_the_arrows(package):
-    bad = []
-    for path in _modules(f"refiner/{package}"):
-        for name in _imports(path):
-            parts = name.split(".")
-            if parts[0] == "refiner" and len(parts) > 1 and parts[1] in SUBPACKAGES and parts[1] != package \
-                    and parts[1] not in ALLOWED[package]:
-                bad.append(f"{path.relative_to(REPO)} imports {name}")
+def _layer(module: str) -> str | None:
+    """The layer an imported module belongs to (``adapters.x`` and ``plugins.x`` are the installed names too)."""
+    parts = module.split(".")
+    if parts[0] in ("adapters", "plugins"):
+        return parts[0]
+    return parts[1] if parts[0] == "refiner" and len(parts) > 1 and parts[1] in LAYERS else None
+
+
+@pytest.mark.parametrize("layer", LAYERS)
+def test_imports_follow_the_arrows(layer):
+    folder = layer if layer in ("plugins", "adapters") else f"refiner/{layer}"
+    bad = [f"{path.relative_to(REPO)} imports {name}" for path in _modules(folder) for name in _imports(path)
+           if _layer(name) not in (None, layer) and _layer(name) not in ALLOWED[layer]]
     assert not bad, bad
 
 
@@ -83,3 +90,19 @@ def test_only_adapters_import_adapter_modules():
                 elif parts[0] == "adapters" and len(parts) > 1 and parts[1] in ADAPTER_MODULES:
                     bad.append(f"{p.relative_to(REPO)}: {n}")
     assert not bad, bad
+
+
+def test_old_flat_import_paths_give_the_new_module_with_a_deprecation_warning():
+    import importlib
+    import sys
+
+    from refiner.core.moved_modules import MOVED
+
+    for old, new in MOVED.items():
+        sys.modules.pop(f"refiner.{old}", None)
+        with pytest.warns(DeprecationWarning, match=f"refiner.{old} moved to refiner.{new}"):
+            module = importlib.import_module(f"refiner.{old}")
+        assert module is importlib.import_module(f"refiner.{new}")
+    from refiner.pipeline import Refiner  # the names a 0.1 user imported are still there
+
+    assert Refiner is importlib.import_module("refiner").Refiner

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from refiner.core.manifest import CONTENT_KEY, content_sha256, read_generator_manifest, read_refiner_manifest, write_manifest
-from refiner.reference.models import WEIGHTS_DIR, load_reference_generator
+from refiner.reference import WEIGHTS_DIR, load_reference_generator
 from refiner.refinement.pipeline import _PARTS, _WEIGHTS, Refiner
 
 

@@ -11,14 +11,13 @@ import numpy as np
 import pluggy
 import pytest
 
-from refiner.adapters import BUILTIN_ADAPTERS
-from refiner.adapters.base import AdapterInfo
 from refiner.core.skeletons import list_skeletons
-from refiner.plugins import get_plugin_manager, hookimpl, hookspecs
+from refiner.plugins import BUILTIN_ADAPTERS, AdapterInfo, get_plugin_manager, hookimpl, hookspecs
 from refiner.plugins.manager import DISABLE_AUTOLOAD_ENV, AdapterPluginWarning, get_adapter, list_adapters
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "third_party_adapter"
-HOOKS = ("refiner_adapter_info", "refiner_convert_output", "refiner_recognize_generator", "refiner_sample_generator")
+HOOKS = ("refiner_adapter_info", "refiner_convert_output", "refiner_encode_motions", "refiner_recognize_generator",
+         "refiner_sample_generator")
 
 
 def make_distribution(root: Path, name: str, entry_points: dict[str, str], modules: dict[str, str] | None = None):
@@ -152,8 +151,7 @@ BROKEN_MODULES = {
             return None
     """,
     "mr_duplicate_adapter": """
-        from refiner.adapters.base import AdapterInfo
-        from refiner.plugins import hookimpl
+        from refiner.plugins import AdapterInfo, hookimpl
         @hookimpl
         def refiner_adapter_info():
             return AdapterInfo("actor", "a second 'actor'", ("humanact12",))
@@ -260,9 +258,9 @@ def test_adapters_command_shows_where_plugins_come_from(example_installed, capsy
 
 
 def test_broken_builtin_is_skipped_with_a_warning(monkeypatch):
-    import refiner.adapters
+    import refiner.plugins.manager
 
-    monkeypatch.setattr(refiner.adapters, "BUILTIN_ADAPTERS", ("action2motion", "no_such_builtin"))
+    monkeypatch.setattr(refiner.plugins.manager, "BUILTIN_ADAPTERS", ("action2motion", "no_such_builtin"))
     with pytest.warns(AdapterPluginWarning, match="'no_such_builtin' \\(built-in\\) failed to import"):
         pm = get_plugin_manager(autoload=False)
     assert list(pm.adapters()) == ["action2motion"]
@@ -345,3 +343,49 @@ def test_a_raising_convert_or_sample_hook_is_wrapped_naming_the_plugin(pm):
         gen.sample(0)
     with pytest.raises(ValueError, match="plugin 'action2motion', built-in.*representation"):  # built-ins too
         pm.convert("action2motion", np.zeros((1, 60, 72)))
+
+
+def test_builtin_adapters_do_not_filter_by_adapter_name(pm):
+    """The manager calls only the plugin that registered the adapter, so built-ins take no `adapter` argument."""
+    for name in BUILTIN_ADAPTERS:
+        plugin = pm.get_plugin(name)
+        for hook in ("refiner_convert_output", "refiner_sample_generator", "refiner_encode_motions"):
+            impl = getattr(plugin, hook, None)
+            assert impl is None or "adapter" not in inspect.signature(impl).parameters, (name, hook)
+
+
+def test_encode_calls_the_owner_and_checks_what_it_gets(pm):
+    from refiner.core.motion import Motion
+    from refiner.plugins.manager import encode
+
+    motion = Motion(np.random.default_rng(0).normal(size=(8, 24, 3)) * 0.1)
+    (xyz,) = pm.encode("action2motion", [motion], options={"representation": "xyz"})
+    assert xyz.shape == (8, 72) and xyz.dtype == np.float32
+    back = pm.convert("action2motion", xyz[None], options={"representation": "xyz"})[0]
+    np.testing.assert_array_equal(back.joints, motion.joints)
+    assert encode("action2motion", motion, pm=pm, representation="lie")[0].shape == (8, 72)
+    with pytest.raises(ValueError, match="'actor' .*does not implement refiner_encode_motions"):
+        pm.encode("actor", [motion])
+    with pytest.raises(ValueError, match="cannot encode skeleton"):
+        pm.encode("action2motion", [Motion(np.zeros((8, 22, 3)), skeleton="humanml3d")])
+    with pytest.raises(ValueError, match="must be Motion objects"):
+        pm.encode("action2motion", [np.zeros((8, 24, 3))])
+    with pytest.raises(ValueError, match="unknown option.*'colour'.*accepted: representation, continuous"):
+        pm.encode("action2motion", [motion], options={"colour": 1})
+
+
+def test_old_import_paths_warn_and_give_the_same_objects():
+    import refiner.adapters
+    import refiner.adapters.base
+    import refiner.core.rotations
+    import refiner.plugins
+
+    with pytest.warns(DeprecationWarning, match="refiner.plugins.adapter_info.AdapterInfo"):
+        from refiner.adapters.base import AdapterInfo as old
+    assert old is AdapterInfo
+    with pytest.warns(DeprecationWarning, match="refiner.core.rotations"):
+        assert refiner.adapters.base.rotvec_to_rotmat is refiner.core.rotations.rotvec_to_rotmat
+    with pytest.warns(DeprecationWarning, match="refiner.plugins.BUILTIN_ADAPTERS"):
+        assert refiner.adapters.BUILTIN_ADAPTERS == refiner.plugins.BUILTIN_ADAPTERS
+    with pytest.raises(AttributeError):
+        refiner.adapters.base.no_such_name

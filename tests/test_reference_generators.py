@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from refiner.reference.models import (
+from refiner.reference import (
     GENERATOR_KINDS,
     WEIGHTS_DIR,
     LieVAEGenerator,
@@ -163,7 +163,7 @@ def test_train_generator_command(tmp_path, capsys):
 @pytest.mark.real_data
 def test_lie_targets_are_smooth_and_decode_to_the_same_joints(humanact12):
     from refiner.adapters.action2motion import joints_to_lie, lie_to_joints
-    from refiner.reference.models import lie_targets
+    from refiner.reference import lie_targets
 
     clips = [m.joints for m in humanact12.split("train").motions[:40]]
     ours = [lie_targets(c) for c in clips]
@@ -180,8 +180,8 @@ def test_lie_targets_are_smooth_and_decode_to_the_same_joints(humanact12):
 
 
 def test_unwrap_rotvecs_follows_a_rotation_through_pi():
-    from refiner.adapters.base import rotmat_to_rotvec, rotvec_to_rotmat
-    from refiner.reference.models import unwrap_rotvecs
+    from refiner.core.rotations import rotmat_to_rotvec, rotvec_to_rotmat
+    from refiner.reference import unwrap_rotvecs
 
     angles = np.linspace(2.6, 3.7, 12)  # about z, through pi
     canonical = rotmat_to_rotvec(rotvec_to_rotmat(angles[:, None] * np.array([0.0, 0.0, 1.0])))
@@ -190,3 +190,15 @@ def test_unwrap_rotvecs_follows_a_rotation_through_pi():
     out = unwrap_rotvecs(lie)
     np.testing.assert_allclose(out[:, 5], angles, atol=1e-5)
     np.testing.assert_allclose(rotvec_to_rotmat(out[:, 3:]), rotvec_to_rotmat(canonical), atol=1e-5)
+
+
+def test_training_crops_is_deprecated_and_pads_with_the_last_frame():
+    from refiner.reference import training_crops
+
+    clips = [np.arange(10, dtype=np.float32).reshape(5, 2), np.arange(40.0).reshape(20, 2)]
+    with pytest.warns(DeprecationWarning, match="ClipCrops"):
+        crops = training_crops(clips, 8, np.random.default_rng(0))
+    assert crops.shape == (2, 8, 2) and crops.dtype == np.float32
+    np.testing.assert_array_equal(crops[0], np.concatenate([clips[0], np.repeat(clips[0][-1:], 3, axis=0)]))
+    start = int(crops[1, 0, 0]) // 2
+    np.testing.assert_array_equal(crops[1], clips[1][start : start + 8])  # stored values, not re-centred

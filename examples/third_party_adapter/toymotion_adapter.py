@@ -3,7 +3,9 @@
 ToyMotion emits joint positions ``(n, T, 24, 3)`` in centimetres, y up and facing +z, SMPL joint
 order. The adapter converts them into the HumanAct12 canonical frame: metres, y down, facing -z,
 first-frame pelvis at the origin. Install with ``pip install examples/third_party_adapter``; the
-entry point in ``pyproject.toml`` does the rest.
+entry point in ``pyproject.toml`` does the rest. It uses only the plugin contract (``refiner.plugins``),
+:class:`refiner.Motion` and a rotation from :mod:`refiner.core.rotations`; the plugin manager calls its
+conversion hook for its own adapter name only.
 """
 from __future__ import annotations
 
@@ -11,9 +13,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from refiner.adapters.base import AdapterInfo, recenter, yup_to_ydown
 from refiner.core.motion import Motion
-from refiner.plugins import hookimpl
+from refiner.core.rotations import yup_to_ydown
+from refiner.plugins import AdapterInfo, hookimpl
 
 __all__ = ["INFO", "ToyMotionGenerator", "to_motions"]
 
@@ -63,7 +65,8 @@ def to_motions(output: Any, *, actions=None) -> list[Motion]:
         x = x[None]
     if x.ndim != 4 or x.shape[2:] != (24, 3):
         raise ValueError(f"ToyMotion output must have shape (n, T, 24, 3); got {tuple(x.shape)}.")
-    joints = recenter(yup_to_ydown(x / 100.0))
+    joints = yup_to_ydown(x / 100.0)
+    joints -= joints[:, :1, :1]  # first-frame pelvis at the origin
     actions = [None] * len(joints) if actions is None else list(actions)
     return [Motion(j, skeleton="humanact12", fps=INFO.fps, action=a) for j, a in zip(joints, actions)]
 
@@ -79,9 +82,7 @@ def refiner_recognize_generator(generator: Any) -> str | None:
 
 
 @hookimpl
-def refiner_convert_output(adapter: str, output: Any, options: Mapping[str, Any]):
-    if adapter != INFO.name:
-        return None
+def refiner_convert_output(output: Any, options: Mapping[str, Any]) -> list[Motion]:
     unknown = set(options) - {"actions"}
     if unknown:
         raise ValueError(f"unknown option(s) {sorted(unknown)} for adapter 'toymotion'; accepted: actions.")

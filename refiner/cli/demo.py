@@ -1,6 +1,6 @@
 """The demo: sample every action from a reference generator, refine it, and draw what changed.
 
-:func:`run_demo` wraps a shipped reference generator (:mod:`refiner.reference.models`) in a
+:func:`run_demo` wraps a shipped reference generator (:mod:`refiner.reference`) in a
 :class:`~refiner.refinement.refined_generator.RefinedGenerator`, samples one clip per HumanAct12 action, and writes
 for each action a before/after animation (GIF, plus MP4 when ffmpeg is on PATH), a key-frame
 strip with flagged anchors marked, a plot of the per-frame anchor probability with the anchors and
@@ -169,7 +169,7 @@ def run_demo(
     # these import torch or matplotlib: here, so that --help stays cheap
     from refiner.evaluation.evaluators import load_recognizer
     from refiner.io import viz
-    from refiner.reference.models import load_reference_generator
+    from refiner.reference import load_reference_generator
     from refiner.refinement.pipeline import Refiner
 
     started = time.perf_counter()

@@ -27,7 +27,7 @@ def train_generator_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def train_generator_run(args: argparse.Namespace) -> int:
-    from refiner.reference.models import train_reference_generator  # imports torch: here, so that --help stays cheap
+    from refiner.reference import train_reference_generator  # imports torch: here, so that --help stays cheap
 
     set_threads(args.threads)
     dataset = load_dataset("humanact12", args.data)

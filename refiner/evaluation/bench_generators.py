@@ -34,7 +34,7 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
     event ``"row"``: ``kind``, ``label`` (generated or refined) and ``metrics`` of each generator row.
     """
     # these import torch: here, so that importing the suites (``motion-refiner --help``) stays cheap
-    from refiner.reference.models import GENERATOR_KINDS, load_reference_generator
+    from refiner.reference import GENERATOR_KINDS, load_reference_generator
     from refiner.refinement.pipeline import Refiner
 
     progress = progress or ignore_progress

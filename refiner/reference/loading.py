@@ -1,0 +1,127 @@
+"""The reference generators by kind: loading the shipped weights, training and saving new ones with a manifest.
+
+The shipped weights (float16 safetensors, trained on HumanAct12 subjects 1-10) live in
+:data:`WEIGHTS_DIR` with a ``manifest.json`` listing each file's sha256; HumanAct12 is for academic,
+non-commercial use only, and so are they.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from refiner.core.manifest import file_sha256, read_generator_manifest, write_manifest
+from refiner.reference.base import ReferenceGenerator
+from refiner.reference.lie_vae import LieVAEGenerator
+from refiner.reference.transformer_cvae import TransformerCVAEGenerator
+
+__all__ = ["GENERATOR_KINDS", "LICENCE", "WEIGHTS_DIR", "load_reference_generator", "train_reference_generator"]
+
+#: Where the shipped generator weights and their manifest live.
+WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights" / "generators"
+LICENCE = ("Trained on HumanAct12 (derived from PHSPD) subjects 1-10: academic, non-commercial use only. "
+           "Cite Action2Motion (Guo et al. 2020) and PHSPD (Zou et al. 2020).")
+
+#: Reference generator classes by the short name used by the CLI and the shipped weights.
+GENERATOR_KINDS: dict[str, type[ReferenceGenerator]] = {"a2m": LieVAEGenerator, "actor": TransformerCVAEGenerator}
+
+
+def load_reference_generator(kind: str = "a2m", *, folder: str | os.PathLike | None = None, device: str = "cpu",
+                             verify: bool = True):
+    """Load a trained reference generator.
+
+    Parameters
+    ----------
+    kind : {"a2m", "actor"}, default="a2m"
+    folder : path, optional
+        A folder written by :func:`train_reference_generator` (``<kind>.safetensors`` plus
+        ``manifest.json``); default the shipped weights, :data:`WEIGHTS_DIR`.
+    device : str, default="cpu"
+    verify : bool, default=True
+        Check the manifest against its `content_sha256` and the file against its sha256.
+
+    Returns
+    -------
+    LieVAEGenerator or TransformerCVAEGenerator
+
+    Raises
+    ------
+    ValueError
+        Unknown kind, missing or corrupt weights.
+    """
+    cls = _kind(kind)
+    folder = Path(folder) if folder is not None else WEIGHTS_DIR
+    _, paths = read_generator_manifest(folder, verify=verify)
+    if kind not in paths:
+        raise ValueError(f"{str(folder / 'manifest.json')!r} lists no {kind!r} generator; train one with "
+                         f"`motion-refiner train-generator --kind {kind} --out {folder}`.")
+    path = paths[kind]
+    return cls.load(path, device=device)
+
+
+def train_reference_generator(kind: str, dataset, out: str | os.PathLike, *, split: str = "train", quick: bool = False,
+                              max_seconds: float | None = None, random_state: int = 0, device: str = "auto",
+                              verbose: bool = False, command: str = ""):
+    """Train one reference generator on a split of HumanAct12 and save it (float16) with a manifest entry.
+
+    Parameters
+    ----------
+    kind : {"a2m", "actor"}
+    dataset : MotionDataset
+        HumanAct12 (with subject ids when ``split`` is not ``"all"``).
+    out : path
+        Folder; ``<kind>.safetensors`` is written and ``manifest.json`` updated (other kinds kept).
+    split : {"train", "all"}, default="train"
+        ``"train"`` is subjects 1-10, the shipped weights' split.
+    quick : bool, default=False
+        A tiny network and a few epochs (for tests).
+    max_seconds : float, optional
+        Training time limit (training then depends on the machine's speed; by default the fixed
+        number of epochs and early stopping make it reproducible for a seed).
+    random_state : int, default=0
+    device : str, default="auto"
+    verbose : bool, default=False
+        Show a progress bar.
+    command : str, optional
+        The command line recorded in the manifest.
+
+    Returns
+    -------
+    LieVAEGenerator or TransformerCVAEGenerator
+        The fitted generator.
+    """
+    cls = _kind(kind)
+    data = dataset.split(split)
+    params: dict[str, Any] = {"max_seconds": max_seconds, "random_state": random_state, "device": device,
+                              "verbose": verbose}
+    if quick:
+        params.update(n_epochs=2, steps_per_epoch=2, batch_size=16, patience=5)
+        params.update({"hidden": 16, "latent_dim": 4} if kind == "a2m" else
+                      {"d_model": 16, "n_layers": 1, "n_heads": 2, "ffn_dim": 16})
+    gen = cls(**params).fit(data)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"{kind}.safetensors"
+    gen.save(path, half=True)
+    manifest_path = out / "manifest.json"
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
+    manifest.update({"dataset": getattr(dataset, "name", "humanact12"), "licence": LICENCE,
+                     "crop_frames": gen.n_frames, "frame": "HumanAct12 native (metres, y down, facing -z), "
+                     "first-frame root at the origin"})
+    subjects = sorted({int(s) for s in getattr(data, "subjects", [])})
+    manifest.setdefault("generators", {})[kind] = {
+        "file": path.name, "sha256": file_sha256(path), "class": cls.__name__, "split": split, "subjects": subjects,
+        "clips": len(data), "parameters": gen.n_parameters(), "epochs": len(gen.history_),
+        "best_val_loss": min((h["val"] for h in gen.history_ if "val" in h), default=None),
+        "train_seconds": gen.train_seconds_, "seed": random_state, "dtype": "float16", "command": command,
+        "adapter": gen.adapter, "adapter_options": {k: v for k, v in gen.adapter_options().items() if k != "reference"},
+    }
+    write_manifest(manifest_path, manifest)
+    return gen
+
+
+def _kind(kind: str) -> type[ReferenceGenerator]:
+    if kind not in GENERATOR_KINDS:
+        raise ValueError(f"unknown reference generator {kind!r}; known: {', '.join(GENERATOR_KINDS)}.")
+    return GENERATOR_KINDS[kind]
