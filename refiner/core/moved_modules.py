@@ -24,7 +24,7 @@ MOVED = {
     "bench_samples": "evaluation.bench_samples",
     "bench_skeletons": "evaluation.bench_skeletons",
     "bvh": "io.bvh",
-    "commands": "cli.commands",
+    "commands": "cli",
     "components": "nn.components",
     "converted_refinement": "refinement.converted_refinement",
     "data_sources": "io.data_sources",
