@@ -25,6 +25,21 @@ def test_split_by_subject(humanact12):
         humanact12.split("val")
 
 
+def test_cmu_split_holds_out_whole_subjects_and_every_action_but_step():
+    from conftest import shared_data_dir
+
+    from refiner.io.datasets import CMU_ACTIONS, CMU_TEST_SUBJECTS, load_cmu_mocap
+
+    cmu = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz")
+    train, test = cmu.split("train"), cmu.split("test")
+    assert (len(train), len(test)) == (815, 273)
+    assert set(test.subjects.tolist()) == set(CMU_TEST_SUBJECTS)
+    assert not set(train.subjects.tolist()) & set(CMU_TEST_SUBJECTS)
+    share = np.bincount(test.actions, minlength=8) / np.bincount(cmu.actions, minlength=8)
+    step = CMU_ACTIONS.index("step")
+    assert share[step] == 0 and all(0.2 <= share[a] <= 0.3 for a in range(8) if a != step), share
+
+
 def test_three_sources_give_identical_clips(humanact12, tmp_path):
     """A folder of Action2Motion .npy clips and ACTOR's pkl give the same clips as the packed npz."""
     pick = list(range(0, 1191, 150))
