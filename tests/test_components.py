@@ -1,4 +1,7 @@
 """The learned-component contract (sklearn style) for every network component, plus their maths."""
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 from sklearn.mixture import GaussianMixture
@@ -7,11 +10,13 @@ from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.segmentation import segment
 from refiner.concepts.transitions import TransitionGenerator, collect_transitions
 from refiner.core.validation import NotFittedError
+from refiner.nn.training import TrainSchedule
 from refiner.refinement.anchor_refinement import AnchorRefiner
 from refiner.refinement.recognition import AnchorRecognizer, anchor_targets, gmm_log_likelihood, match_anchors
 from refiner.refinement.transition_refinement import TransitionRefiner, transition_layout
 
-TINY = dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16, n_epochs=2, steps_per_epoch=1, batch_size=8, device="cpu")
+SCHEDULE = TrainSchedule(n_epochs=2, steps_per_epoch=1, batch_size=8, device="cpu")
+TINY = dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16, schedule=SCHEDULE)
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +41,7 @@ def _fitted(name, data):
         return AnchorRefiner(crop_frames=20, **TINY).fit(clips, anchors, actions, concepts)
     if name == "transition_refiner":
         return TransitionRefiner(crop_frames=20, **TINY).fit(clips, anchors, [s.coeffs for s in segs])
-    return TransitionGenerator(4, hidden=16, n_epochs=2, steps_per_epoch=1, batch_size=8, device="cpu").fit(
+    return TransitionGenerator(4, hidden=16, schedule=SCHEDULE).fit(
         collect_transitions(clips, segs, actions))
 
 
@@ -102,3 +107,50 @@ def test_anchor_targets_and_matching():
     idx, tau, dur = transition_layout(10, [0, 4, 9])
     assert idx.tolist() == [0, 0, 0, 0, 1, 1, 1, 1, 1, 1]
     assert tau[4] == 0.0 and tau[9] == 1.0 and dur[0] == 4
+
+
+def test_schedule_is_one_parameter_and_old_flat_files_fold_into_it(synthetic, tmp_path):
+    """Every estimator takes its training settings as one ``schedule``; the shipped files, saved with the
+    settings flat (``n_epochs``, ..., ``verbose``), load with them folded into it."""
+    from safetensors import safe_open
+
+    from refiner.nn.components import NetworkComponent
+    from refiner.refinement.flaw_classifier import FlawClassifier
+    from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
+
+    weights = Path(__file__).resolve().parents[1] / "refiner" / "weights" / "humanact12"
+    for cls in (*CLASSES.values(), FlawClassifier, FlawRecognizer, FlawRepairer):
+        params = cls().get_params()
+        assert isinstance(params["schedule"], TrainSchedule) and not {"n_epochs", "device", "verbose"} & set(params)
+    with safe_open(str(weights / "recognizer.safetensors"), "np") as f:
+        flat = json.loads(f.metadata()["refiner.params"])
+    assert flat["n_epochs"] == 600 and "schedule" not in flat  # written before the schedule was one parameter
+    schedule = AnchorRecognizer.load(weights / "recognizer.safetensors").schedule
+    assert (schedule.n_epochs, schedule.patience, schedule.max_seconds, schedule.progress) == (600, 40, 100.0, True)
+    with pytest.raises(ValueError, match="`schedule` must be"):
+        AnchorRecognizer(schedule={"n_epochs": 2}).fit(*_recognizer_data(synthetic))
+
+    class Flat(NetworkComponent):  # an estimator that still declares the fields one by one
+        def __init__(self, n_epochs=3, batch_size=4, learning_rate=1e-3, patience=2, steps_per_epoch=None,
+                     max_seconds=None, device="cpu", verbose=True):
+            self.n_epochs, self.batch_size, self.learning_rate, self.patience = n_epochs, batch_size, learning_rate, patience
+            self.steps_per_epoch, self.max_seconds, self.device, self.verbose = steps_per_epoch, max_seconds, device, verbose
+
+    assert Flat()._schedule() == TrainSchedule(3, 4, 1e-3, patience=2, device="cpu", progress=True)
+    assert Flat._init_params({"n_epochs": 5}) == {"n_epochs": 5}  # its saved params stay as they are
+
+
+def test_anchor_refiner_uses_the_validation_clips(synthetic):
+    """``validation=`` held-out clips select the weights (it was silently ignored)."""
+    clips, segs, actions, concepts = synthetic
+    anchors = [s.anchors for s in segs]
+    model = AnchorRefiner(crop_frames=20, **TINY).fit(clips[:7], anchors[:7], actions[:7], concepts,
+                                                      validation=(clips[7:], anchors[7:], actions[7:]))
+    assert all("val" in h for h in model.history_)
+    with pytest.raises(ValueError, match="validation"):
+        AnchorRefiner(crop_frames=20, **TINY).fit(clips, anchors, actions, concepts, validation=([], [], []))
+
+
+def _recognizer_data(data):
+    clips, segs, actions, _ = data
+    return clips, [s.anchors for s in segs], actions

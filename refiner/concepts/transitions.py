@@ -23,7 +23,7 @@ from refiner.core.serialization import load_state, save_state
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.layers import MLP, mpjpe
-from refiner.nn.training import fit_network, resolve_device, seeded
+from refiner.nn.training import TrainSchedule, fit_network, resolve_device, seeded
 
 __all__ = ["TransitionSet", "collect_transitions", "TransitionCVAEConfig", "TransitionCVAE", "TransitionGenerator",
            "spline_frames", "arc_length_profile", "retime"]
@@ -193,10 +193,9 @@ class TransitionGenerator(NetworkComponent):
         λ_KL in Eq. 3.
     max_frames : int, default=120
         Longest transition used for training (longer ones are skipped).
-    n_epochs, batch_size, learning_rate, patience, steps_per_epoch, max_seconds : training schedule
-    device : str, default="auto"
+    schedule : TrainSchedule, default=TrainSchedule(n_epochs=300, patience=20)
+        How the network is trained (epochs, batch size, learning rate, device, ...).
     random_state : int or None, default=0
-    verbose : bool, default=False
 
     Attributes
     ----------
@@ -208,23 +207,15 @@ class TransitionGenerator(NetworkComponent):
     _fitted_attributes = ("n_joints_", "history_")
 
     def __init__(self, latent_dim: int = 32, *, hidden: int = 256, anchor_weight: float = 0.5, kl_weight: float = 1e-4,
-                 max_frames: int = 120, n_epochs: int = 300, batch_size: int = 128, learning_rate: float = 5e-4,
-                 patience: int = 20, steps_per_epoch: int | None = None, max_seconds: float | None = None, device: str = "auto",
-                 random_state: int | None = 0, verbose: bool = False):
+                 max_frames: int = 120, schedule: TrainSchedule = TrainSchedule(n_epochs=300, patience=20),
+                 random_state: int | None = 0):
         self.latent_dim = latent_dim
         self.hidden = hidden
         self.anchor_weight = anchor_weight
         self.kl_weight = kl_weight
         self.max_frames = max_frames
-        self.n_epochs = n_epochs
-        self.batch_size = batch_size
-        self.learning_rate = learning_rate
-        self.patience = patience
-        self.steps_per_epoch = steps_per_epoch
-        self.max_seconds = max_seconds
-        self.device = device
+        self.schedule = schedule
         self.random_state = random_state
-        self.verbose = verbose
 
     def _make_network(self, fitted: dict) -> TransitionCVAE:
         return TransitionCVAE(TransitionCVAEConfig(fitted["n_joints_"], self.latent_dim, self.hidden))
@@ -234,7 +225,8 @@ class TransitionGenerator(NetworkComponent):
         if not isinstance(transitions, TransitionSet) or len(transitions) == 0:
             raise ValueError("`transitions` must be a non-empty TransitionSet.")
         rng = check_random_state(self.random_state)
-        device = resolve_device(self.device)
+        schedule = self._schedule()
+        device = resolve_device(schedule.device)
         keep = np.flatnonzero(transitions.durations <= self.max_frames)
         train = transitions.subset(keep)
         if validation is None:
@@ -248,7 +240,7 @@ class TransitionGenerator(NetworkComponent):
             val = _transition_batch(_transition_arrays(validation, self.max_frames), np.arange(len(validation)), device)
             self.history_ = fit_network(
                 self.network_, self._loss, lambda idx, r: _transition_batch(arrays, idx, device), len(train), val,
-                self._schedule(), rng, desc="transition CVAE",
+                schedule, rng, desc="transition CVAE",
             )
         return self
 

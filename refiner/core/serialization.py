@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import asdict
 from pathlib import Path
 from typing import Mapping
 
@@ -56,7 +57,7 @@ def pack_metadata(obj, **fitted) -> dict[str, str]:
     return {
         "refiner.class": type(obj).__name__,
         "refiner.format_version": FORMAT_VERSION,
-        "refiner.params": json.dumps(obj.get_params()),
+        "refiner.params": json.dumps(obj.get_params(), default=asdict),  # a dataclass parameter as its dict
         "refiner.fitted": json.dumps(fitted),
     }
 

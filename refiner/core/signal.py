@@ -1,9 +1,9 @@
-"""Small pure functions on frame sequences: ramps, resampling, linear in-filling, overlapping windows."""
+"""Small pure functions on frame sequences: ramps, resampling, linear in-filling, overlapping windows and their blend."""
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["smoothstep", "resample", "linear_infill", "window_starts"]
+__all__ = ["smoothstep", "resample", "linear_infill", "window_starts", "triangular_weights", "overlap_add"]
 
 
 def smoothstep(u):
@@ -43,3 +43,38 @@ def window_starts(n_frames: int, size: int, stride: int) -> list[int]:
     if starts[-1] != n_frames - size:
         starts.append(n_frames - size)
     return starts
+
+
+def triangular_weights(size: int) -> np.ndarray:
+    """``(size,)`` blend weights rising 1, 2, ... from both ends of a window: its middle counts most."""
+    return np.minimum(np.arange(1, size + 1), np.arange(size, 0, -1)).astype(np.float64)
+
+
+def overlap_add(windows: np.ndarray, starts, n_frames: int, weights: np.ndarray | None = None) -> np.ndarray:
+    """Blend per-frame outputs of overlapping windows back into one sequence.
+
+    Parameters
+    ----------
+    windows : ndarray of shape (W, size, ...)
+        Window ``k`` covers frames ``starts[k] .. starts[k] + size - 1``.
+    starts : sequence of int (W,)
+        As :func:`window_starts` gives them; together the windows cover every frame.
+    n_frames : int
+    weights : ndarray of shape (size,), optional
+        Weight of each position in a window (default: all alike, a plain mean).
+
+    Returns
+    -------
+    ndarray of shape (n_frames, ...), float64
+        Per frame, the weighted mean of the windows that cover it.
+    """
+    windows = np.asarray(windows)
+    size = windows.shape[1]
+    weights = np.ones(size) if weights is None else np.asarray(weights, dtype=np.float64)
+    per_frame = (1,) * (windows.ndim - 2)
+    total = np.zeros((n_frames,) + windows.shape[2:])
+    wsum = np.zeros(n_frames)
+    for k, s in enumerate(starts):
+        total[s : s + size] += weights.reshape((size,) + per_frame) * windows[k]
+        wsum[s : s + size] += weights
+    return total / wsum.reshape((n_frames,) + per_frame)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict
+from dataclasses import asdict, fields, replace
 
 import numpy as np
 import torch
@@ -16,6 +16,9 @@ from refiner.nn.training import TrainSchedule, resolve_device
 __all__ = ["NetworkComponent", "NOT_FITTED"]
 
 NOT_FITTED = "This %(name)s is not fitted yet; call fit() or load() first."
+#: Constructor arguments of estimators that declare the schedule field by field (files saved before
+#: ``schedule`` was one hyper-parameter hold them so), with the schedule field each one sets.
+_FLAT_SCHEDULE = {**{f.name: f.name for f in fields(TrainSchedule)}, "verbose": "progress"}
 
 
 class NetworkComponent(BaseEstimator):
@@ -23,17 +26,34 @@ class NetworkComponent(BaseEstimator):
 
     Subclasses implement ``_make_network(fitted: dict) -> nn.Module`` and list their non-network
     fitted attributes in ``_fitted_attributes`` (JSON values) and ``_fitted_arrays`` (numpy arrays).
+    Their training settings are one hyper-parameter, ``schedule`` (a :class:`~refiner.nn.training.TrainSchedule`,
+    saved as a dict); a subclass that still declares the schedule's fields one by one (``n_epochs``,
+    ``batch_size``, ..., ``verbose``) is served too.
     """
 
     _fitted_attributes: tuple[str, ...] = ()
     _fitted_arrays: tuple[str, ...] = ()
 
     def _schedule(self) -> TrainSchedule:
-        return TrainSchedule(
-            n_epochs=self.n_epochs, batch_size=self.batch_size, learning_rate=self.learning_rate,
-            patience=self.patience, steps_per_epoch=self.steps_per_epoch, max_seconds=self.max_seconds, device=self.device,
-            progress=self.verbose,
-        )
+        """The schedule ``fit`` trains with (``ValueError`` when ``schedule`` is not a TrainSchedule)."""
+        if "schedule" not in self._get_param_names():
+            return TrainSchedule(**{field: getattr(self, name) for name, field in _FLAT_SCHEDULE.items()
+                                    if hasattr(self, name)})
+        if not isinstance(self.schedule, TrainSchedule):
+            raise ValueError(f"`schedule` must be a refiner.nn.training.TrainSchedule; got {self.schedule!r}.")
+        return self.schedule
+
+    @classmethod
+    def _init_params(cls, params: dict) -> dict:
+        """Constructor arguments from a file's params: ``schedule`` back to a TrainSchedule; the flat
+        schedule fields of files saved before it was one parameter folded into it (over the class default)."""
+        if "schedule" not in cls._get_param_names():
+            return params
+        params = dict(params)
+        saved = params.pop("schedule", None)
+        flat = {_FLAT_SCHEDULE[k]: params.pop(k) for k in list(params) if k in _FLAT_SCHEDULE}
+        base = cls().schedule if saved is None else TrainSchedule(**saved)
+        return {**params, "schedule": replace(base, **flat)}
 
     @property
     def device_(self) -> torch.device:
@@ -68,7 +88,7 @@ class NetworkComponent(BaseEstimator):
         """Rebuild a fitted component from :meth:`save`'s file (strict: every weight must match)."""
         tensors, metadata = load_state(path)
         params, fitted = check_metadata(path, metadata, cls)
-        obj = cls(**params)
+        obj = cls(**cls._init_params(params))
         for name in cls._fitted_attributes:
             setattr(obj, name, fitted[name])
         for name in cls._fitted_arrays:

@@ -1,4 +1,4 @@
-"""The one shared training loop (appendix A / E.2) and the clip-crop batcher.
+"""The one shared training loop (appendix A / E.2), its schedule, and the batch helpers: crops and devices.
 
 Adam at 5e-4 with polynomial decay (power 0.95), batch 128, each module trained on its own.
 The paper trains for thousands of epochs; we stop early on a validation loss instead, keep the
@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 import logging
 import os
+import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -16,10 +18,11 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 from torch import nn
+from tqdm.auto import tqdm
 
 from refiner.core.serialization import load_state, save_state
 
-__all__ = ["ClipCrops", "TrainSchedule", "fit_network", "resolve_device", "seeded"]
+__all__ = ["ClipCrops", "TrainSchedule", "crop_start", "fit_network", "put_crop", "resolve_device", "seeded", "to_device"]
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +46,11 @@ def resolve_device(device: str | None) -> torch.device:
     return resolved
 
 
+def to_device(batch: dict[str, np.ndarray], device) -> dict[str, torch.Tensor]:
+    """A batch of numpy arrays as tensors on ``device`` (made contiguous first)."""
+    return {k: torch.from_numpy(np.ascontiguousarray(v)).to(device) for k, v in batch.items()}
+
+
 class seeded:
     """Context manager: torch's RNG forked and seeded from a numpy Generator (the user's RNG untouched)."""
 
@@ -61,9 +69,16 @@ class seeded:
         return self._fork.__exit__(*exc)
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainSchedule:
-    """Optimisation settings shared by every module."""
+    """How a learned component is trained: one hyper-parameter, ``schedule``, of every estimator.
+
+    Frozen, so that an estimator's default schedule can be a default argument and ``get_params``
+    gives back what was passed. ``n_epochs`` x ``steps_per_epoch`` steps (default: one pass over the
+    training items per epoch) of ``batch_size`` items; Adam at ``learning_rate`` with polynomial decay
+    (``power``); early stop after ``patience`` epochs without a better validation loss or after
+    ``max_seconds``; ``device`` ("auto": CUDA when available); ``progress`` shows a progress bar.
+    """
 
     n_epochs: int = 200
     batch_size: int = 128
@@ -74,6 +89,25 @@ class TrainSchedule:
     max_seconds: float | None = None
     device: str = "auto"
     progress: bool = False
+
+
+def crop_start(n_frames: int, length: int, rng: np.random.Generator, *, holding: int | None = None) -> int:
+    """A random first frame of a ``length``-frame crop of an ``n_frames`` clip (0 when the clip is no
+    longer); with ``holding``, of a crop that contains that frame."""
+    lo, hi = 0, max(n_frames - length, 0)
+    if holding is not None:
+        lo, hi = max(0, holding - length + 1), min(holding, hi)
+    return int(rng.integers(lo, max(hi, lo) + 1))
+
+
+def put_crop(out: np.ndarray, b: int, frames: np.ndarray, origin, *, pad: bool = True) -> int:
+    """Write ``frames - origin`` to the start of row ``b`` of ``out (B, L, ...)``; with ``pad`` the rest of
+    the row repeats the last frame (the A2M convention), else it stays as it was. Returns ``len(frames)``."""
+    n = len(frames)
+    out[b, :n] = frames - origin
+    if pad:
+        out[b, n:] = out[b, n - 1]
+    return n
 
 
 class ClipCrops:
@@ -105,11 +139,9 @@ class ClipCrops:
         starts = np.zeros(n, dtype=np.int64)
         for b, i in enumerate(indices):
             clip = self.clips[i]
-            start = int(rng.integers(0, max(len(clip) - length, 0) + 1))
+            start = crop_start(len(clip), length, rng)
             crop = clip[start : start + length]
-            x[b, : len(crop)] = crop - crop[:1, :1]
-            x[b, len(crop):] = x[b, len(crop) - 1]  # pad with the last frame (the A2M convention)
-            valid[b, : len(crop)] = True
+            valid[b, : put_crop(x, b, crop, crop[:1, :1])] = True
             starts[b] = start
             for name, per_clip in self.labels.items():
                 lab = per_clip[i][start : start + length]
@@ -138,10 +170,6 @@ def fit_network(
     best weights by validation loss are kept and training stops after ``patience`` epochs without
     improvement. With ``checkpoint`` the state is saved every epoch and a run resumes from it.
     """
-    import time
-
-    from tqdm.auto import tqdm
-
     started = time.perf_counter()
     steps = schedule.steps_per_epoch or max(1, int(np.ceil(n_train / schedule.batch_size)))
     total = steps * schedule.n_epochs
@@ -217,8 +245,6 @@ def _resume(path, network, opt, sched):
             if "step" in state:
                 state["step"] = state["step"].cpu()
             opt.state[p] = state
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # stepping the schedule forward without optimizer steps is the point here
         for _ in range(int(meta["scheduler_step"])):

@@ -20,7 +20,7 @@ from refiner.concepts.anchors import AnchorConcepts
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.layers import MLP, mpjpe
-from refiner.nn.training import fit_network, resolve_device, seeded
+from refiner.nn.training import TrainSchedule, crop_start, fit_network, put_crop, resolve_device, seeded, to_device
 from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig
 
 __all__ = ["AnchorRefiner", "AnchorRefinementNet", "masked_window"]
@@ -75,7 +75,9 @@ class AnchorRefiner(NetworkComponent):
         Weight of the concept cross-entropy beside the anchor MPJPE. The paper does not give one;
         at 1.0 the held-out cross-entropy (rising after ~15 epochs) drove early stopping long
         before the anchor MPJPE stopped improving.
-    n_epochs, batch_size, learning_rate, patience, steps_per_epoch, max_seconds, device, random_state, verbose
+    schedule : TrainSchedule, default=TrainSchedule()
+        How the network is trained (epochs, batch size, learning rate, device, ...).
+    random_state : int or None, default=0
 
     Attributes
     ----------
@@ -92,10 +94,8 @@ class AnchorRefiner(NetworkComponent):
     _fitted_arrays = ("concept_offsets_", "concept_poses_")
 
     def __init__(self, *, d_model: int = 128, n_layers: int = 2, n_heads: int = 4, ffn_dim: int = 128,
-                 dropout: float = 0.1, crop_frames: int = 60, concept_weight: float = 0.1, n_epochs: int = 200,
-                 batch_size: int = 128, learning_rate: float = 5e-4, patience: int = 15,
-                 steps_per_epoch: int | None = None, max_seconds: float | None = None, device: str = "auto", random_state: int | None = 0,
-                 verbose: bool = False):
+                 dropout: float = 0.1, crop_frames: int = 60, concept_weight: float = 0.1,
+                 schedule: TrainSchedule = TrainSchedule(), random_state: int | None = 0):
         self.d_model = d_model
         self.n_layers = n_layers
         self.n_heads = n_heads
@@ -103,15 +103,8 @@ class AnchorRefiner(NetworkComponent):
         self.dropout = dropout
         self.crop_frames = crop_frames
         self.concept_weight = concept_weight
-        self.n_epochs = n_epochs
-        self.batch_size = batch_size
-        self.learning_rate = learning_rate
-        self.patience = patience
-        self.steps_per_epoch = steps_per_epoch
-        self.max_seconds = max_seconds
-        self.device = device
+        self.schedule = schedule
         self.random_state = random_state
-        self.verbose = verbose
 
     def _make_network(self, fitted: dict) -> AnchorRefinementNet:
         cfg = MotionEncoderConfig(fitted["n_joints_"] * 3, self.d_model, self.n_layers, self.n_heads, self.ffn_dim,
@@ -120,12 +113,25 @@ class AnchorRefiner(NetworkComponent):
         return AnchorRefinementNet(cfg, n_concepts, fitted["n_joints_"])
 
     def fit(self, clips, anchors, actions, concepts: AnchorConcepts, *, validation=None) -> "AnchorRefiner":
-        """Train on real clips, their segmentation anchors and fitted anchor concepts."""
+        """Train on real clips, their segmentation anchors and fitted anchor concepts.
+
+        ``validation`` : tuple (clips, anchors, actions), optional
+            Held-out clips whose anchors select the best weights and stop training early; default:
+            10 % of the training clips' anchors.
+        """
         check_is_fitted(concepts, msg="`concepts` must be a fitted AnchorConcepts.")
         clips = [np.asarray(c, dtype=np.float32) for c in clips]
         if not clips or len(clips) != len(anchors) or len(clips) != len(actions):
             raise ValueError("`clips`, `anchors` and `actions` must be non-empty and of equal length.")
         actions = np.asarray(actions, dtype=np.int64)
+        n_fit = len(clips)
+        if validation is not None:  # the held-out clips go after the training ones; all their anchors validate
+            val_clips, val_anchors, val_actions = validation
+            if not len(val_clips) or len(val_clips) != len(val_anchors) or len(val_clips) != len(val_actions):
+                raise ValueError("`validation` must be non-empty (clips, anchors, actions) of equal length.")
+            clips = clips + [np.asarray(c, dtype=np.float32) for c in val_clips]
+            anchors = [*anchors, *val_anchors]
+            actions = np.concatenate([actions, np.asarray(val_actions, dtype=np.int64)])
         rng = check_random_state(self.random_state)
         self.n_joints_ = int(clips[0].shape[1])
         self.n_actions_ = int(concepts.n_actions_)
@@ -134,20 +140,22 @@ class AnchorRefiner(NetworkComponent):
         items = [(c, k) for c, a in enumerate(anchors) for k in range(len(a))]
         labels = {(c, k): int(self.concept_offsets_[actions[c]] + concepts.predict(clips[c][anchors[c][k]][None], actions[c])[0])
                   for c, k in items}
-        order = rng.permutation(len(items))
-        n_val = max(1, len(items) // 10) if validation is None else 0
-        train_items = [items[i] for i in order[n_val:]]
-        val_items = [items[i] for i in order[:n_val]]
-        device = resolve_device(self.device)
+        fit_items = [(c, k) for c, k in items if c < n_fit]
+        order = rng.permutation(len(fit_items))
+        n_val = max(1, len(fit_items) // 10) if validation is None else 0
+        train_items = [fit_items[i] for i in order[n_val:]]
+        val_items = [fit_items[i] for i in order[:n_val]] if validation is None else [(c, k) for c, k in items if c >= n_fit]
+        schedule = self._schedule()
+        device = resolve_device(schedule.device)
 
         def make_batch(idx, r, pool=train_items):
-            return _to_device(self._batch([pool[i] for i in idx], clips, anchors, actions, labels, r), device)
+            return to_device(self._batch([pool[i] for i in idx], clips, anchors, actions, labels, r), device)
 
         with seeded(rng):
             self.network_ = self._make_network({"n_joints_": self.n_joints_}).to(device)
             val_batch = make_batch(np.arange(len(val_items)), np.random.default_rng(0), val_items) if val_items else None
             self.history_ = fit_network(self.network_, self._loss, make_batch, len(train_items), val_batch,
-                                        self._schedule(), rng, desc="anchor refinement")
+                                        schedule, rng, desc="anchor refinement")
         return self
 
     def _batch(self, items, clips, anchors, actions, labels, rng) -> dict:
@@ -163,14 +171,10 @@ class AnchorRefiner(NetworkComponent):
         for b, (c, k) in enumerate(items):
             clip, anc = clips[c], anchors[c]
             frame = int(anc[k])
-            lo_start = max(0, frame - length + 1)
-            hi_start = min(frame, max(len(clip) - length, 0))
-            start = int(rng.integers(lo_start, max(hi_start, lo_start) + 1))
+            start = crop_start(len(clip), length, rng, holding=frame)
             crop = clip[start : start + length]
             origin = crop[:1, :1]
-            x[b, : len(crop)] = crop - origin
-            x[b, len(crop):] = x[b, len(crop) - 1]
-            valid[b, : len(crop)] = True
+            valid[b, : put_crop(x, b, crop, origin)] = True
             lo, hi = masked_window(len(clip), anc, k)
             keep[b, max(lo - start, 0) : max(hi - start, 0)] = False
             index[b] = frame - start
@@ -232,6 +236,3 @@ class AnchorRefiner(NetworkComponent):
                           torch.from_numpy(self.concept_poses_[concept : concept + 1]).to(device))
         return (pose[0].cpu().numpy() + origin[0]).astype(np.float32), concept - int(self.concept_offsets_[action])
 
-
-def _to_device(batch: dict, device) -> dict:
-    return {k: torch.from_numpy(np.ascontiguousarray(v)).to(device) for k, v in batch.items()}

@@ -17,7 +17,7 @@ from torch import nn
 from refiner.core.skeletons import rigid_skeleton
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
-from refiner.nn.training import fit_network, resolve_device, seeded
+from refiner.nn.training import TrainSchedule, crop_start, fit_network, resolve_device, seeded, to_device
 from refiner.refinement.flaw_features import N_FEATURES, flaw_features
 from refiner.refinement.flaw_training import FLAW_LABEL_CM, IGNORE_BELOW_CM
 from refiner.refinement.training_flaws import GROUPS, synthesize
@@ -59,7 +59,9 @@ class FlawClassifier(NetworkComponent):
         The refiner puts a clip whose bones vary more than this on rigid bones before detection
         (:func:`refiner.core.skeletons.rigid_skeleton`), so training crops get the same
         treatment after their flaws (None: not); the labels are what is left of the flaw.
-    n_epochs, batch_size, learning_rate, patience, steps_per_epoch, max_seconds, device, random_state, verbose
+    schedule : TrainSchedule, default=TrainSchedule(n_epochs=30, batch_size=64, learning_rate=1e-3, patience=8, steps_per_epoch=100)
+        How the network is trained (epochs, batch size, learning rate, device, ...).
+    random_state : int or None, default=0
 
     Attributes
     ----------
@@ -76,9 +78,10 @@ class FlawClassifier(NetworkComponent):
     _fitted_arrays = ("mean_", "scale_")
 
     def __init__(self, *, hidden: int = 64, n_layers: int = 4, kernel: int = 5, dropout: float = 0.1, copies: int = 8,
-                 crop: int = 64, rigid_tolerance: float | None = 0.005, n_epochs: int = 30, batch_size: int = 64, learning_rate: float = 1e-3,
-                 patience: int = 8, steps_per_epoch: int | None = 100, max_seconds: float | None = None,
-                 device: str = "auto", random_state: int | None = 0, verbose: bool = False):
+                 crop: int = 64, rigid_tolerance: float | None = 0.005,
+                 schedule: TrainSchedule = TrainSchedule(n_epochs=30, batch_size=64, learning_rate=1e-3, patience=8,
+                                                         steps_per_epoch=100),
+                 random_state: int | None = 0):
         self.hidden = hidden
         self.n_layers = n_layers
         self.kernel = kernel
@@ -86,15 +89,8 @@ class FlawClassifier(NetworkComponent):
         self.copies = copies
         self.crop = crop
         self.rigid_tolerance = rigid_tolerance
-        self.n_epochs = n_epochs
-        self.batch_size = batch_size
-        self.learning_rate = learning_rate
-        self.patience = patience
-        self.steps_per_epoch = steps_per_epoch
-        self.max_seconds = max_seconds
-        self.device = device
+        self.schedule = schedule
         self.random_state = random_state
-        self.verbose = verbose
 
     def _make_network(self, fitted: dict) -> FlawTCN:
         return FlawTCN(N_FEATURES, self.hidden, self.n_layers, self.kernel, self.dropout)
@@ -108,7 +104,7 @@ class FlawClassifier(NetworkComponent):
         k = 0
         for clip in clips:
             for _ in range(copies):
-                start = int(rng.integers(0, max(len(clip) - self.crop, 0) + 1))
+                start = crop_start(len(clip), self.crop, rng)
                 crop = np.asarray(clip[start : start + self.crop], np.float64)
                 if len(crop) < 8:
                     continue
@@ -137,17 +133,17 @@ class FlawClassifier(NetworkComponent):
         flat = train["feats"].reshape(-1, N_FEATURES)
         self.mean_ = flat.mean(0).astype(np.float32)
         self.scale_ = np.maximum(flat.std(0), 1e-3).astype(np.float32)
-        device = resolve_device(self.device)
+        schedule = self._schedule()
+        device = resolve_device(schedule.device)
 
         def batch(data, idx):
-            return {"feats": torch.from_numpy((data["feats"][idx] - self.mean_) / self.scale_).to(device),
-                    "label": torch.from_numpy(data["label"][idx]).to(device),
-                    "weight": torch.from_numpy(data["weight"][idx]).to(device)}
+            return to_device({"feats": (data["feats"][idx] - self.mean_) / self.scale_, "label": data["label"][idx],
+                              "weight": data["weight"][idx]}, device)
 
         with seeded(rng):
             self.network_ = self._make_network({}).to(device)
             self.history_ = fit_network(self.network_, _loss, lambda idx, r: batch(train, idx), len(train["feats"]),
-                                        batch(val, np.arange(len(val["feats"]))), self._schedule(), rng,
+                                        batch(val, np.arange(len(val["feats"]))), schedule, rng,
                                         checkpoint=checkpoint, desc="flaw classifier")
         self.network_.to("cpu").eval()
         return self

@@ -16,6 +16,7 @@ import torch
 from scipy.ndimage import binary_dilation
 
 from refiner.core.signal import linear_infill
+from refiner.nn.training import crop_start, put_crop, to_device
 from refiner.refinement.recognition import anchor_targets
 from refiner.refinement.training_flaws import synthesize
 
@@ -74,7 +75,7 @@ class FlawBatches:
         out["true_action"] = self.actions[np.asarray(indices)]
         for b, i in enumerate(indices):
             clip = self.clips[i]
-            start = int(rng.integers(0, max(len(clip) - length, 0) + 1))
+            start = crop_start(len(clip), length, rng)
             crop = clip[start : start + length]
             crop = crop - crop[:1, :1]
             m = len(crop)
@@ -88,8 +89,7 @@ class FlawBatches:
             infill = linear_infill(flawed, suspect) if suspect.any() else flawed
             given = np.where(hidden[:, None, None], infill, flawed)
             for key, value in (("clean", crop), ("flawed", flawed), ("given", given), ("infill", infill)):
-                out[key][b, :m] = value
-                out[key][b, m:] = value[-1]
+                put_crop(out[key], b, value, 0.0)
             out["valid"][b, :m] = True
             out["suspect"][b, :m] = suspect
             out["hidden"][b, :m] = hidden
@@ -98,7 +98,7 @@ class FlawBatches:
             out["anchor_target"][b, :m] = self.targets[i][start : start + m]
             drop = rng.random() < self.drop_action_probability
             out["action"][b] = self.n_actions if drop else self.actions[i]
-        return {k: torch.from_numpy(v).to(device) for k, v in out.items()}
+        return to_device(out, device)
 
     @staticmethod
     def _suspect(flawed: np.ndarray, rng) -> np.ndarray:

@@ -16,11 +16,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from refiner.core.signal import linear_infill, window_starts
+from refiner.core.signal import linear_infill, overlap_add, triangular_weights, window_starts
 from refiner.core.skeletons import get_skeleton
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
-from refiner.nn.training import fit_network, resolve_device, seeded
+from refiner.nn.training import TrainSchedule, fit_network, resolve_device, seeded
 from refiner.refinement.flaw_networks import FlawRecognitionNet, FlawRepairNet, FrameTransformerConfig
 from refiner.refinement.flaw_training import FlawBatches
 
@@ -39,10 +39,9 @@ class _LearnedStep(NetworkComponent):
     _fitted_attributes = ("n_joints_", "n_actions_", "skeleton_", "history_")
 
     def __init__(self, *, d_model: int = 128, n_layers: int = 3, n_heads: int = 4, ffn_dim: int = 256,
-                 dropout: float = 0.1, window: int = 64, min_crop: int = 32, n_epochs: int = 60,
-                 batch_size: int = 64, learning_rate: float = 5e-4, patience: int = 1000,
-                 steps_per_epoch: int | None = 200, max_seconds: float | None = None, device: str = "auto",
-                 random_state: int | None = 0, verbose: bool = False, anchor_weight: float = 0.5,
+                 dropout: float = 0.1, window: int = 64, min_crop: int = 32,
+                 schedule: TrainSchedule = TrainSchedule(n_epochs=60, batch_size=64, patience=1000, steps_per_epoch=200),
+                 random_state: int | None = 0, anchor_weight: float = 0.5,
                  action_weight: float = 0.2, context_weight: float = 0.2, velocity_weight: float = 0.5):
         self.anchor_weight = anchor_weight
         self.action_weight = action_weight
@@ -55,15 +54,8 @@ class _LearnedStep(NetworkComponent):
         self.dropout = dropout
         self.window = window
         self.min_crop = min_crop
-        self.n_epochs = n_epochs
-        self.batch_size = batch_size
-        self.learning_rate = learning_rate
-        self.patience = patience
-        self.steps_per_epoch = steps_per_epoch
-        self.max_seconds = max_seconds
-        self.device = device
+        self.schedule = schedule
         self.random_state = random_state
-        self.verbose = verbose
 
     def _config(self, fitted: dict) -> FrameTransformerConfig:
         return FrameTransformerConfig(fitted["n_joints_"], fitted["n_actions_"], self.d_model, self.n_layers,
@@ -75,7 +67,8 @@ class _LearnedStep(NetworkComponent):
         self.n_joints_ = int(np.asarray(clips[0]).shape[1])
         self.n_actions_ = int(n_actions)
         self.skeleton_ = skeleton
-        device = resolve_device(self.device)
+        schedule = self._schedule()
+        device = resolve_device(schedule.device)
         lengths = (min(self.min_crop, self.window), self.window)
         batches = FlawBatches(clips, actions, anchors, skeleton=skeleton, lengths=lengths, n_actions=n_actions)
         val = FlawBatches(*validation, skeleton=skeleton, lengths=(self.window, self.window), n_actions=n_actions)
@@ -87,7 +80,7 @@ class _LearnedStep(NetworkComponent):
             val_batch = val.sample(val_rng.choice(len(val), size=min(256, len(val)), replace=len(val) < 256),
                                    val_rng, device)
             self.history_ = fit_network(self.network_, self._loss, lambda idx, r: batches.sample(idx, r, device),
-                                        len(batches), val_batch, self._schedule(), rng, checkpoint=checkpoint,
+                                        len(batches), val_batch, schedule, rng, checkpoint=checkpoint,
                                         desc=desc)
         self.network_.to("cpu").eval()
         return self
@@ -96,9 +89,10 @@ class _LearnedStep(NetworkComponent):
         """Copy fitted arrays into the network's buffers (the repairer's anchor concepts)."""
 
     @torch.no_grad()
-    def _windowed(self, x: np.ndarray, fn, *extra: np.ndarray):
-        """Run ``fn(x_windows, *extra_windows)`` on ``(B, T, ...)`` arrays in one pass over all windows;
-        blend the per-frame outputs ``(B*W, w, ...)`` back to ``(B, T, ...)``."""
+    def _windowed(self, x: np.ndarray, actions: np.ndarray, fn, *extra: np.ndarray) -> list[np.ndarray]:
+        """Run ``fn(x_windows, actions, *extra_windows)`` on ``(B, T, ...)`` arrays and the clips' ``(B,)``
+        actions in one pass over all half-overlapping windows; blend the per-frame outputs ``(W*B, w, ...)``
+        back to ``(B, T, ...)`` with triangular weights."""
         n_batch, n_frames = x.shape[:2]
         size = min(self.window, n_frames)
         starts = window_starts(n_frames, size, max(size // 2, 1))
@@ -108,19 +102,13 @@ class _LearnedStep(NetworkComponent):
             t = torch.from_numpy(np.array(a, copy=True))
             return torch.cat([t[:, s : s + size] for s in starts]).to(device)
 
-        outs = fn(cut(x), *[cut(e) for e in extra])
+        outs = fn(cut(x), torch.as_tensor(np.tile(actions, len(starts)), device=device), *[cut(e) for e in extra])
         outs = outs if isinstance(outs, tuple) else (outs,)
-        ramp = np.minimum(np.arange(1, size + 1), np.arange(size, 0, -1)).astype(np.float64)
         results = []
         for o in outs:
-            o = o.float().cpu().numpy().reshape(len(starts), n_batch, size, *o.shape[2:])
-            acc = np.zeros((n_batch, n_frames) + o.shape[3:])
-            wsum = np.zeros((n_frames,))
-            for k, s in enumerate(starts):
-                w = ramp.reshape((1, size) + (1,) * (o.ndim - 3))
-                acc[:, s : s + size] += w * o[k]
-                wsum[s : s + size] += ramp
-            results.append(acc / wsum.reshape((1, n_frames) + (1,) * (o.ndim - 3)))
+            o = o.float().cpu().numpy().reshape(len(starts), n_batch, size, *o.shape[2:])  # (W, B, w, ...)
+            blended = overlap_add(np.moveaxis(o, 1, 2), starts, n_frames, triangular_weights(size))  # (T, B, ...)
+            results.append(np.ascontiguousarray(np.moveaxis(blended, 0, 1)))
         return results
 
     def _actions(self, actions, n: int) -> np.ndarray:
@@ -135,9 +123,9 @@ class FlawRecognizer(_LearnedStep):
     """Recognition: where the flaws are, where the anchors are, and which action it is.
 
     Parameters are the network sizes (``d_model``, ``n_layers``, ``n_heads``, ``ffn_dim``,
-    ``dropout``), ``window`` (frames seen at once), ``min_crop`` and the training schedule
-    (``n_epochs`` x ``steps_per_epoch`` steps of ``batch_size``, ``max_seconds``, ``device``, ...),
-    plus ``anchor_weight`` and ``action_weight`` (loss weights beside the flaw BCE).
+    ``dropout``), ``window`` (frames seen at once), ``min_crop``, ``schedule`` (a
+    :class:`~refiner.nn.training.TrainSchedule`: ``n_epochs`` x ``steps_per_epoch`` steps of ``batch_size``,
+    ``max_seconds``, ``device``, ...) and ``random_state``, plus ``anchor_weight`` and ``action_weight`` (loss weights beside the flaw BCE).
 
     Attributes
     ----------
@@ -187,18 +175,15 @@ class FlawRecognizer(_LearnedStep):
         check_is_fitted(self, "network_", msg=NOT_FITTED)
         x = np.asarray(joints, np.float32)
         acts = self._actions(actions, len(x))
-        n_windows = len(window_starts(x.shape[1], min(self.window, x.shape[1]), max(min(self.window, x.shape[1]) // 2, 1)))
-
         unknown = bool((acts == self.n_actions_).any())
 
-        def fn(xw):
-            a = torch.as_tensor(np.tile(acts, n_windows), device=xw.device)
+        def fn(xw, a):
             flaw, anchor, logits = self.network_(xw, a)
             if unknown and not bool((a == self.n_actions_).all()):  # some clips need their action estimated
                 _, _, logits = self.network_(xw, torch.full_like(a, self.n_actions_))
             return torch.sigmoid(flaw), torch.sigmoid(anchor), torch.softmax(logits, -1)[:, None].expand(-1, xw.shape[1], -1)
 
-        flaw, anchor, action = self._windowed(x, fn)
+        flaw, anchor, action = self._windowed(x, acts, fn)
         return {"flaw": flaw, "anchor": anchor, "action": action.mean(1)}
 
     def calibrate(self, clips, actions, *, clip_rate: float = 0.05, min_run: int = 2) -> float:
@@ -278,15 +263,12 @@ class FlawRepairer(_LearnedStep):
         infill = np.stack([linear_infill(c, s) for c, s in zip(x, suspect)])
         if hide:
             x = infill
-        acts = self._actions(actions, len(x))
-        n_windows = len(window_starts(x.shape[1], min(self.window, x.shape[1]), max(min(self.window, x.shape[1]) // 2, 1)))
         root = get_skeleton(self.skeleton_).root
 
-        def fn(xw, iw, sw, hw):
-            a = torch.as_tensor(np.tile(acts, n_windows), device=xw.device)
+        def fn(xw, a, iw, sw, hw):
             return self.network_(xw, iw, sw, hw, a, root=root)
 
-        return self._windowed(x, fn, infill, suspect, hidden)[0].astype(np.float32)
+        return self._windowed(x, self._actions(actions, len(x)), fn, infill, suspect, hidden)[0].astype(np.float32)
 
     def correction(self, joints: np.ndarray, actions=None) -> np.ndarray:
         """``(B, T)`` metres: how far the network moves each frame (mean over joints) when every frame is

@@ -26,11 +26,12 @@ from sklearn.mixture import GaussianMixture
 from torch import nn
 
 from refiner.core.serialization import check_metadata, load_state, pack_metadata, save_state
+from refiner.core.signal import overlap_add, window_starts
 from refiner.core.skeletons import joint_bone_lengths, with_bone_lengths
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.layers import MLP
-from refiner.nn.training import ClipCrops, fit_network, resolve_device, seeded
+from refiner.nn.training import ClipCrops, TrainSchedule, fit_network, resolve_device, seeded, to_device
 from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig
 
 __all__ = ["AnchorRecognizer", "AnchorQuality", "AnchorRecognitionNet", "Recognition", "anchor_targets", "match_anchors",
@@ -137,7 +138,9 @@ class AnchorRecognizer(NetworkComponent):
         Minimum probability of a recognised anchor; "auto" picks it on held-out clips (best F1).
     action_weight : float, default=0.2
         Weight of the action cross-entropy beside the anchor BCE.
-    n_epochs, batch_size, learning_rate, patience, steps_per_epoch, max_seconds, device, random_state, verbose
+    schedule : TrainSchedule, default=TrainSchedule()
+        How the network is trained (epochs, batch size, learning rate, device, ...).
+    random_state : int or None, default=0
 
     Attributes
     ----------
@@ -154,10 +157,8 @@ class AnchorRecognizer(NetworkComponent):
 
     def __init__(self, *, d_model: int = 128, n_layers: int = 2, n_heads: int = 4, ffn_dim: int = 128,
                  dropout: float = 0.1, crop_frames: int = 60, n_components: int = 2, flaw_percentile: float = 1.0,
-                 detect_threshold: float | str = "auto", action_weight: float = 0.2, n_epochs: int = 200,
-                 batch_size: int = 128, learning_rate: float = 5e-4, patience: int = 15,
-                 steps_per_epoch: int | None = None, max_seconds: float | None = None, device: str = "auto", random_state: int | None = 0,
-                 verbose: bool = False):
+                 detect_threshold: float | str = "auto", action_weight: float = 0.2,
+                 schedule: TrainSchedule = TrainSchedule(), random_state: int | None = 0):
         self.d_model = d_model
         self.n_layers = n_layers
         self.n_heads = n_heads
@@ -168,15 +169,8 @@ class AnchorRecognizer(NetworkComponent):
         self.flaw_percentile = flaw_percentile
         self.detect_threshold = detect_threshold
         self.action_weight = action_weight
-        self.n_epochs = n_epochs
-        self.batch_size = batch_size
-        self.learning_rate = learning_rate
-        self.patience = patience
-        self.steps_per_epoch = steps_per_epoch
-        self.max_seconds = max_seconds
-        self.device = device
+        self.schedule = schedule
         self.random_state = random_state
-        self.verbose = verbose
 
     def _make_network(self, fitted: dict) -> AnchorRecognitionNet:
         cfg = MotionEncoderConfig(fitted["n_joints_"] * 3, self.d_model, self.n_layers, self.n_heads, self.ffn_dim,
@@ -207,15 +201,16 @@ class AnchorRecognizer(NetworkComponent):
             clips, anchors, actions = [clips[i] for i in tr_idx], [anchors[i] for i in tr_idx], actions[tr_idx]
         self.n_joints_ = int(clips[0].shape[1])
         self.n_actions_ = int(n_actions if n_actions is not None else max(actions.max(), np.max(validation[2])) + 1)
-        device = resolve_device(self.device)
+        schedule = self._schedule()
+        device = resolve_device(schedule.device)
         crops = self._crops(clips, anchors, actions)
         val_crops = self._crops(*validation)
         with seeded(rng):
             self.network_ = self._make_network({"n_joints_": self.n_joints_, "n_actions_": self.n_actions_}).to(device)
-            val_batch = _to_device(val_crops.sample(np.arange(len(val_crops)), np.random.default_rng(0)), device)
+            val_batch = to_device(val_crops.sample(np.arange(len(val_crops)), np.random.default_rng(0)), device)
             self.history_ = fit_network(
-                self.network_, self._loss, lambda idx, r: _to_device(crops.sample(idx, r), device), len(crops),
-                val_batch, self._schedule(), rng, desc="anchor recognition",
+                self.network_, self._loss, lambda idx, r: to_device(crops.sample(idx, r), device), len(crops),
+                val_batch, schedule, rng, desc="anchor recognition",
             )
         train_feats = self._anchor_features(clips, anchors)
         gmm = GaussianMixture(self.n_components, covariance_type="full", reg_covar=1e-4,
@@ -263,20 +258,13 @@ class AnchorRecognizer(NetworkComponent):
         """Probability (T,), action probabilities (A,), features (T, D) of a whole clip, windowed."""
         net, device = self.network_.eval(), self.device_
         n_frames, window = len(joints), 2 * self.crop_frames
-        starts = [0] if n_frames <= window else list(range(0, n_frames - window, self.crop_frames)) + [n_frames - window]
+        starts = window_starts(n_frames, window, self.crop_frames)
         crops = np.stack([joints[s : s + window] - joints[s : s + 1, :1] for s in starts])
         x = torch.from_numpy(np.ascontiguousarray(crops)).to(device).flatten(2)
         logits, action_logits, feats = net(x)
-        prob, feat_sum = np.zeros(n_frames), np.zeros((n_frames, feats.shape[-1]))
-        count = np.zeros(n_frames)
-        p, f = torch.sigmoid(logits).cpu().numpy(), feats.cpu().numpy()
-        for k, s in enumerate(starts):
-            stop = s + crops.shape[1]
-            prob[s:stop] += p[k]
-            feat_sum[s:stop] += f[k]
-            count[s:stop] += 1
+        prob = overlap_add(torch.sigmoid(logits).cpu().numpy(), starts, n_frames)
         action = torch.softmax(action_logits, -1).mean(0).cpu().numpy()
-        return prob / count, action, feat_sum / count[:, None]
+        return prob, action, overlap_add(feats.cpu().numpy(), starts, n_frames)
 
     def _anchor_features(self, clips, anchors) -> np.ndarray:
         return np.concatenate([self._forward_clip(np.asarray(c, np.float32))[2][np.asarray(a)] for c, a in zip(clips, anchors)])
@@ -321,10 +309,6 @@ def _peaks(prob: np.ndarray, threshold: float) -> np.ndarray:
         elif prob[p] > prob[kept[-1]]:
             kept[-1] = int(p)
     return np.array([0, *kept, n - 1], dtype=np.int64)
-
-
-def _to_device(batch: dict, device) -> dict:
-    return {k: torch.from_numpy(v).to(device) for k, v in batch.items()}
 
 
 class AnchorQuality(BaseEstimator):

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -28,12 +29,14 @@ log = logging.getLogger(__name__)
 
 #: "default" fits in about 30 minutes per network on one CPU core; "tiny" trains in seconds for tests.
 LEARNED_CONFIGS = {
-    "default": dict(d_model=128, n_layers=3, n_heads=4, ffn_dim=256, n_epochs=40, steps_per_epoch=200, batch_size=64),
-    "tiny": dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16, n_epochs=2, steps_per_epoch=2, batch_size=8),
+    "default": dict(d_model=128, n_layers=3, n_heads=4, ffn_dim=256,
+                    schedule=dict(n_epochs=40, steps_per_epoch=200, batch_size=64)),
+    "tiny": dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8)),
 }
-#: The flaw classifier's settings (about 2 minutes on one CPU core) and its tiny test version.
-CLASSIFIER_CONFIGS = {"default": dict(), "tiny": dict(hidden=8, n_layers=1, copies=1, n_epochs=2, steps_per_epoch=2,
-                                                       batch_size=8)}
+#: The flaw classifier's settings (about 2 minutes on one CPU core) and its tiny test version; ``schedule``
+#: holds the fields that differ from the estimator's default schedule.
+CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
+                      "tiny": dict(hidden=8, n_layers=1, copies=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer")
 
 
@@ -78,23 +81,22 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         return [clips[i] for i in idx], actions[idx], [anchors[i] for i in idx]
 
     n_actions = len(dataset.action_names)
-    common = dict(LEARNED_CONFIGS[config], device=device, random_state=random_state, max_seconds=max_seconds,
-                  verbose=progress)
+    run = dict(device=device, max_seconds=max_seconds, progress=progress)  # every part's schedule gets these
     for name in names:
         if name in done:
             continue
         t0 = time.perf_counter()
+        cls = classes[name]
+        cfg = dict((CLASSIFIER_CONFIGS if cls is FlawClassifier else LEARNED_CONFIGS)[config])
+        schedule = replace(cls().schedule, **cfg.pop("schedule"), **run)
+        est = cls(**cfg, schedule=schedule, random_state=random_state)
         if name == "flaw_classifier":
-            est = FlawClassifier(**CLASSIFIER_CONFIGS[config], device=device, random_state=random_state,
-                                 max_seconds=max_seconds, verbose=progress)
             est.fit(pick(fit_idx)[0], skeleton=skeleton, validation=pick(cal_idx)[0],
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         elif name == "flaw_recognizer":
-            est = FlawRecognizer(**common)
             est.fit(*pick(fit_idx), skeleton=skeleton, n_actions=n_actions, validation=pick(cal_idx),
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         else:
-            est = FlawRepairer(**common)
             if anchor_concepts is None:
                 poses = np.concatenate([clips[i][anchors[i]] for i in fit_idx])
                 acts = np.concatenate([np.full(len(anchors[i]), actions[i]) for i in fit_idx])
@@ -105,7 +107,7 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         est.save(parts_dir / f"{name}.safetensors")
         (parts_dir / f"{name}.json").write_text(json.dumps({
             "seconds": round(time.perf_counter() - t0, 1), "split": split, "fit_clips": int(len(fit_idx)),
-            "calibration_clips": int(len(cal_idx)), "steps": len(est.history_) * est.steps_per_epoch,
+            "calibration_clips": int(len(cal_idx)), "steps": len(est.history_) * est.schedule.steps_per_epoch,
             "history": est.history_[-3:]}, indent=1))
         done[name] = est
     return done

@@ -12,6 +12,7 @@ from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.learning import learn_concepts
 from refiner.concepts.transitions import TransitionGenerator
 from refiner.io.datasets import MotionDataset
+from refiner.nn.training import TrainSchedule
 from refiner.refinement.anchor_refinement import AnchorRefiner
 from refiner.refinement.pipeline import Refiner
 from refiner.refinement.recognition import AnchorQuality, AnchorRecognizer
@@ -82,7 +83,8 @@ def train_refiner(
 
     segs = [segment(c, penalty=concepts.config["penalty"]) for c in clips]
     anchors = [s.anchors for s in segs]
-    common = dict(device=device, random_state=random_state, verbose=progress, max_seconds=max_seconds, **cfg["schedule"])
+    common = dict(schedule=TrainSchedule(device=device, progress=progress, max_seconds=max_seconds, **cfg["schedule"]),
+                  random_state=random_state)
     seconds = {}
 
     def part(name, cls, train):

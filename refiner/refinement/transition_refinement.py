@@ -20,10 +20,11 @@ import torch
 from torch import nn
 
 from refiner.concepts.splines import eval_spline
+from refiner.core.signal import overlap_add, window_starts
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.layers import MLP, mpjpe
-from refiner.nn.training import fit_network, resolve_device, seeded
+from refiner.nn.training import TrainSchedule, crop_start, fit_network, put_crop, resolve_device, seeded, to_device
 from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig
 
 __all__ = ["TransitionRefiner", "TransitionRefinementNet", "transition_layout", "corrupt_transition"]
@@ -109,7 +110,9 @@ class TransitionRefiner(NetworkComponent):
     corrupt_prob : float, default=0.5
         Share of training inputs with a corrupted transition (0 = the paper's variant).
     flaw_percentile : float, default=1.0
-    n_epochs, batch_size, learning_rate, patience, steps_per_epoch, max_seconds, device, random_state, verbose
+    schedule : TrainSchedule, default=TrainSchedule()
+        How the network is trained (epochs, batch size, learning rate, device, ...).
+    random_state : int or None, default=0
 
     Attributes
     ----------
@@ -124,10 +127,8 @@ class TransitionRefiner(NetworkComponent):
 
     def __init__(self, *, d_model: int = 128, n_layers: int = 2, n_heads: int = 4, ffn_dim: int = 128,
                  dropout: float = 0.1, crop_frames: int = 60, max_transitions: int = 32, concept_weight: float = 1.0,
-                 corrupt_prob: float = 0.5, flaw_percentile: float = 1.0, n_epochs: int = 200,
-                 batch_size: int = 128, learning_rate: float = 5e-4, patience: int = 15,
-                 steps_per_epoch: int | None = None, max_seconds: float | None = None, device: str = "auto", random_state: int | None = 0,
-                 verbose: bool = False):
+                 corrupt_prob: float = 0.5, flaw_percentile: float = 1.0,
+                 schedule: TrainSchedule = TrainSchedule(), random_state: int | None = 0):
         self.d_model = d_model
         self.n_layers = n_layers
         self.n_heads = n_heads
@@ -138,15 +139,8 @@ class TransitionRefiner(NetworkComponent):
         self.concept_weight = concept_weight
         self.corrupt_prob = corrupt_prob
         self.flaw_percentile = flaw_percentile
-        self.n_epochs = n_epochs
-        self.batch_size = batch_size
-        self.learning_rate = learning_rate
-        self.patience = patience
-        self.steps_per_epoch = steps_per_epoch
-        self.max_seconds = max_seconds
-        self.device = device
+        self.schedule = schedule
         self.random_state = random_state
-        self.verbose = verbose
 
     def _make_network(self, fitted: dict) -> TransitionRefinementNet:
         cfg = MotionEncoderConfig(fitted["n_joints_"] * 3, self.d_model, self.n_layers, self.n_heads, self.ffn_dim,
@@ -170,17 +164,18 @@ class TransitionRefiner(NetworkComponent):
         order = rng.permutation(len(clips))
         n_val = max(1, len(clips) // 10)
         val_idx, tr_idx = order[:n_val], order[n_val:]
-        device = resolve_device(self.device)
+        schedule = self._schedule()
+        device = resolve_device(schedule.device)
         splines = [[eval_spline(c[m], int(a[m + 1] - a[m]) + 1) for m in range(len(a) - 1)] for c, a in zip(coeffs, anchors)]
 
         def make_batch(idx, r, pool=tr_idx, corrupt=True):
-            return _to_device(self._batch([pool[i] for i in idx], clips, anchors, splines, r, corrupt), device)
+            return to_device(self._batch([pool[i] for i in idx], clips, anchors, splines, r, corrupt), device)
 
         with seeded(rng):
             self.network_ = self._make_network({"n_joints_": self.n_joints_}).to(device)
             val_batch = make_batch(np.arange(len(val_idx)), np.random.default_rng(0), val_idx, False)
             self.history_ = fit_network(self.network_, self._loss, make_batch, len(tr_idx), val_batch,
-                                        self._schedule(), rng, desc="transition refinement")
+                                        schedule, rng, desc="transition refinement")
         residuals = []
         for i in val_idx:
             _, per_transition = self._refine_clip(clips[i], anchors[i])
@@ -198,16 +193,15 @@ class TransitionRefiner(NetworkComponent):
         dur = np.ones((n, length), np.float32)
         for b, c in enumerate(clip_ids):
             clip, anc = clips[c], np.asarray(anchors[c])
-            start = int(rng.integers(0, max(len(clip) - length, 0) + 1))
+            start = crop_start(len(clip), length, rng)
             stop = min(start + length, len(clip))
             src = corrupt_transition(clip, anc, rng) if corrupt and rng.random() < self.corrupt_prob else clip
             origin = clip[start : start + 1, :1]
             idx, t, d = transition_layout(len(clip), anc)
             sl = slice(0, stop - start)
-            out["joints"][b, sl] = src[start:stop] - origin
-            out["target"][b, sl] = clip[start:stop] - origin
             spline_full = np.concatenate([s[:-1] for s in splines[c][:-1]] + [splines[c][-1]])
-            out["spline"][b, sl] = spline_full[start:stop] - origin
+            for key, frames in (("joints", src), ("target", clip), ("spline", spline_full)):
+                put_crop(out[key], b, frames[start:stop], origin, pad=False)
             first = idx[start]
             trans[b, sl] = np.minimum(idx[start:stop] - first, self.max_transitions - 1)
             tau[b, sl], dur[b, sl] = t[start:stop], d[start:stop]
@@ -231,10 +225,9 @@ class TransitionRefiner(NetworkComponent):
         net, device = self.network_.eval(), self.device_
         anchors = np.asarray(anchors)
         n_frames, window = len(joints), 2 * self.crop_frames
-        starts = [0] if n_frames <= window else list(range(0, n_frames - window, self.crop_frames)) + [n_frames - window]
+        starts = window_starts(n_frames, window, self.crop_frames)
         idx, tau, dur = transition_layout(n_frames, anchors)
-        total = np.zeros_like(joints, dtype=np.float64)
-        count = np.zeros(n_frames)
+        windows = []
         for s in starts:
             e = min(s + window, n_frames)
             origin = joints[s : s + 1, :1]
@@ -242,9 +235,8 @@ class TransitionRefiner(NetworkComponent):
             trans = torch.from_numpy(np.minimum(idx[s:e] - idx[s], self.max_transitions - 1)).to(device)[None]
             refined, _ = net(x, None, trans, torch.from_numpy(tau[s:e]).to(device)[None],
                              torch.from_numpy(dur[s:e]).to(device)[None])
-            total[s:e] += refined.view(e - s, -1, 3).cpu().numpy() + origin
-            count[s:e] += 1
-        refined = (total / count[:, None, None]).astype(np.float32)
+            windows.append(refined.view(e - s, -1, 3).cpu().numpy() + origin)
+        refined = overlap_add(np.stack(windows), starts, n_frames).astype(np.float32)
         diff = np.linalg.norm(refined - joints, axis=-1).mean(-1)
         residuals = [float(diff[anchors[m] : anchors[m + 1] + 1].mean()) for m in range(len(anchors) - 1)]
         return refined, residuals
@@ -268,6 +260,3 @@ class TransitionRefiner(NetworkComponent):
         refined, residuals = self._refine_clip(np.asarray(joints, dtype=np.float32), anchors)
         return refined, np.asarray(residuals)
 
-
-def _to_device(batch: dict, device) -> dict:
-    return {k: torch.from_numpy(np.ascontiguousarray(v)).to(device) for k, v in batch.items()}
