@@ -48,7 +48,7 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, progress:
     from sklearn.metrics import roc_auc_score
 
     from refiner.refinement.pipeline import Refiner
-    from refiner.refinement.recognition import match_anchors
+    from refiner.refinement.anchor_recognition import match_anchors
 
     progress = progress or ignore_progress
     test = load_bench_humanact12(data).split("test")

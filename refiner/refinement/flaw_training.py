@@ -17,7 +17,7 @@ from scipy.ndimage import binary_dilation
 
 from refiner.core.signal import linear_infill
 from refiner.nn.training import crop_start, put_crop, to_device
-from refiner.refinement.recognition import anchor_targets
+from refiner.refinement.anchor_recognition import anchor_targets
 from refiner.refinement.training_flaws import synthesize
 
 __all__ = ["FlawBatches", "FLAW_LABEL_CM", "IGNORE_BELOW_CM"]

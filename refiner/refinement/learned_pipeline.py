@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from refiner.core.skeletons import get_skeleton, rigid_skeleton
-from refiner.refinement.recognition import _peaks
+from refiner.refinement.anchor_recognition import anchor_peaks
 from refiner.refinement.repair_candidates import CANDIDATES
 from refiner.refinement.training_flaws import GROUPS
 
@@ -233,7 +233,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
         if report.action is None:
             report.action, report.action_inferred = int(np.argmax(rec["action"][b])), True
         report.action_name = refiner.action_names[report.action] if refiner.action_names else None
-        anchors = _peaks(rec["anchor"][b], _ANCHOR_THRESHOLD)
+        anchors = anchor_peaks(rec["anchor"][b], _ANCHOR_THRESHOLD)
         report.anchors = anchors.tolist()
         report.anchor_probability = [round(float(p), 4) for p in rec["anchor"][b]]
         primary = clf[b] if use_clf else rec["flaw"][b]

@@ -4,7 +4,7 @@ Defaults chosen by measurement on held-out HumanAct12 subjects (11-12) with seed
 (``motion-refiner bench refiner`` and ``bench flaws``); the paper's variants stay available:
 
 - ``quality="pose"``: anchors are scored by a per-action Gaussian mixture over root-relative,
-  proportion-normalised poses (:class:`~refiner.refinement.recognition.AnchorQuality`), thresholded on
+  proportion-normalised poses (:class:`~refiner.refinement.anchor_quality.AnchorQuality`), thresholded on
   held-out *subjects*. The paper's GMM over encoder features (``"encoder"``) separates drifted
   anchors from real ones with ROC AUC 0.55, the pose mixture with 0.93.
 - ``anchor_method="posterior"``: a flagged anchor moves to its posterior-mean pose under that
@@ -49,7 +49,8 @@ from refiner.refinement.anchor_refinement import AnchorRefiner, masked_window
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.learned_pipeline import REPAIRS, check_detect, refine_batch
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
-from refiner.refinement.recognition import AnchorQuality, AnchorRecognizer
+from refiner.refinement.anchor_quality import AnchorQuality
+from refiner.refinement.anchor_recognition import AnchorRecognizer
 from refiner.refinement.transition_refinement import TransitionRefiner
 
 __all__ = ["Refiner", "RefinementReport", "refine", "MODES", "splice", "project_bone_lengths"]

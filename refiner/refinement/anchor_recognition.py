@@ -21,21 +21,20 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 import torch.nn.functional as F
-from sklearn.base import BaseEstimator
 from sklearn.mixture import GaussianMixture
 from torch import nn
 
-from refiner.core.serialization import check_metadata, load_state, pack_metadata, save_state
 from refiner.core.signal import overlap_add, window_starts
-from refiner.core.skeletons import joint_bone_lengths, with_bone_lengths
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.layers import MLP
 from refiner.nn.training import ClipCrops, TrainSchedule, fit_network, resolve_device, seeded, to_device
+# AnchorQuality (the pose-plausibility score of the same anchors) is importable from here as well: the 0.1
+# module refiner.recognition, which now means this one, held both
+from refiner.refinement.anchor_quality import AnchorQuality, gmm_log_likelihood  # noqa: F401
 from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig
 
-__all__ = ["AnchorRecognizer", "AnchorQuality", "AnchorRecognitionNet", "Recognition", "anchor_targets", "match_anchors",
-           "gmm_log_likelihood"]
+__all__ = ["AnchorRecognizer", "AnchorRecognitionNet", "Recognition", "anchor_peaks", "anchor_targets", "match_anchors"]
 
 
 @dataclass
@@ -105,20 +104,6 @@ def match_anchors(predicted, reference, tolerance: int = 2) -> tuple[int, int, i
             used.add(best)
             tp += 1
     return tp, len(predicted), len(reference)
-
-
-def gmm_log_likelihood(features: np.ndarray, weights: np.ndarray, means: np.ndarray, covariances: np.ndarray) -> np.ndarray:
-    """Log-likelihood ``(N,)`` of features ``(N, D)`` under a full-covariance Gaussian mixture."""
-    x = np.asarray(features, dtype=np.float64)
-    logs = []
-    for w, mu, cov in zip(weights, means, covariances):
-        chol = np.linalg.cholesky(cov)
-        z = np.linalg.solve(chol, (x - mu).T)  # (D, N)
-        logdet = 2.0 * np.log(np.diag(chol)).sum()
-        logs.append(np.log(w) - 0.5 * (np.sum(z * z, 0) + logdet + x.shape[1] * np.log(2 * np.pi)))
-    stacked = np.stack(logs)
-    top = stacked.max(0)
-    return top + np.log(np.exp(stacked - top).sum(0))
 
 
 class AnchorRecognizer(NetworkComponent):
@@ -235,7 +220,7 @@ class AnchorRecognizer(NetworkComponent):
         for th in _DETECT_CANDIDATES:
             tp = n_pred = n_ref = 0
             for p, a in zip(probs, anchors):
-                counts = match_anchors(_peaks(p, th), a)
+                counts = match_anchors(anchor_peaks(p, th), a)
                 tp, n_pred, n_ref = tp + counts[0], n_pred + counts[1], n_ref + counts[2]
             f1[float(th)] = 2 * tp / max(n_pred + n_ref, 1)
         self.detect_threshold_ = max(f1, key=f1.get)
@@ -285,18 +270,18 @@ class AnchorRecognizer(NetworkComponent):
         joints = np.asarray(joints, dtype=np.float32)
         prob, action, feats = self._forward_clip(joints)
         if anchors is None:
-            anchors = _peaks(prob, self.detect_threshold_)
+            anchors = anchor_peaks(prob, self.detect_threshold_)
         anchors = np.asarray(anchors, dtype=np.int64)
         scores = self._score_features(feats[anchors])
         return Recognition(anchors, prob.astype(np.float32), scores, scores < self.threshold_, self.threshold_, action)
 
 
-
 _DETECT_CANDIDATES = np.round(np.arange(0.05, 0.55, 0.05), 2)
 
 
-def _peaks(prob: np.ndarray, threshold: float) -> np.ndarray:
-    """Anchor frames: first, last, and local maxima of ``prob`` above ``threshold`` at least 3 frames apart."""
+def anchor_peaks(prob: np.ndarray, threshold: float) -> np.ndarray:
+    """Anchor frames ``(K,)`` from a per-frame anchor probability ``prob (T,)``: the first and last frame and
+    the local maxima of ``prob`` above ``threshold``, at least 3 frames apart."""
     n = len(prob)
     left = np.r_[-np.inf, prob[:-1]]
     right = np.r_[prob[1:], -np.inf]
@@ -309,131 +294,3 @@ def _peaks(prob: np.ndarray, threshold: float) -> np.ndarray:
         elif prob[p] > prob[kept[-1]]:
             kept[-1] = int(p)
     return np.array([0, *kept, n - 1], dtype=np.int64)
-
-
-class AnchorQuality(BaseEstimator):
-    """Anchor quality as pose plausibility: a Gaussian mixture per action over root-relative anchor poses.
-
-    The measured alternative to the paper's GMM over encoder features (kept as
-    ``Refiner(quality="encoder")``): on held-out HumanAct12 clips with seeded anchor drift it
-    separates flawed from real anchors far better than the encoder-feature GMM (ROC AUC 0.93 vs
-    0.55; ``motion-refiner bench refiner`` reproduces the comparison). Neither separates a
-    plausible pose put in the wrong context (seeded ``wrong_anchor``: AUC 0.44 and 0.55). :meth:`denoise` gives the
-    posterior mean pose under the mixture prior and isotropic Gaussian observation noise, used to
-    repair a flagged anchor.
-
-    Poses are scored with their proportions normalised (every bone rescaled to the training mean
-    length, directions kept): body proportions differ between people and generators and are not
-    what makes a pose flawed. Repairs are mapped back onto the input's own bone lengths.
-
-    Parameters
-    ----------
-    n_components : int, default=2
-        Components per action (paper: 2).
-    skeleton : str, default="humanact12"
-    reg_covar : float, default=1e-3
-        Added to covariance diagonals, m².
-    flaw_percentile : float, default=1.0
-        Threshold = this percentile of held-out real anchors' scores.
-    random_state : int or None, default=0
-
-    Attributes
-    ----------
-    weights_ (A, C), means_ (A, C, J*3), covariances_ (A, C, J*3, J*3) : ndarray
-    lengths_ : ndarray (J,)
-        Reference length of the bone ending at each joint (root: 0), metres.
-    threshold_ : float
-    """
-
-    def __init__(self, n_components: int = 2, *, skeleton: str = "humanact12", reg_covar: float = 1e-3,
-                 flaw_percentile: float = 1.0, random_state: int | None = 0):
-        self.n_components = n_components
-        self.skeleton = skeleton
-        self.reg_covar = reg_covar
-        self.flaw_percentile = flaw_percentile
-        self.random_state = random_state
-
-    def fit(self, poses, actions, *, validation=None, n_actions: int | None = None) -> "AnchorQuality":
-        """Fit on real anchor poses ``(N, J, 3)`` with their actions; ``validation=(poses, actions)`` sets the threshold."""
-        self.lengths_ = joint_bone_lengths(np.asarray(poses, dtype=np.float64), self.skeleton).mean(0)
-        x = self._features(poses)
-        actions = np.asarray(actions, dtype=np.int64)
-        if len(x) != len(actions) or len(x) == 0:
-            raise ValueError(f"`poses` and `actions` must be non-empty and of equal length; got {len(x)} and {len(actions)}.")
-        n_actions = int(actions.max()) + 1 if n_actions is None else n_actions
-        rng = check_random_state(self.random_state)
-        w, mu, cov = [], [], []
-        for a in range(n_actions):
-            group = x[actions == a]
-            if len(group) < self.n_components:
-                raise ValueError(f"action {a} has {len(group)} anchors; need at least {self.n_components}.")
-            g = GaussianMixture(self.n_components, covariance_type="full", reg_covar=self.reg_covar,
-                                random_state=int(rng.integers(2**31))).fit(group)
-            w.append(g.weights_), mu.append(g.means_), cov.append(g.covariances_)
-        self.weights_, self.means_, self.covariances_ = np.stack(w), np.stack(mu), np.stack(cov)
-        val_poses, val_actions = validation if validation is not None else (poses, actions)
-        self.threshold_ = float(np.percentile(self.score(val_poses, val_actions), self.flaw_percentile))
-        return self
-
-    def score(self, poses, actions) -> np.ndarray:
-        """Log-likelihood ``(N,)`` of each root-relative pose under its action's mixture."""
-        check_is_fitted(self, "weights_", msg=NOT_FITTED)
-        x = self._features(poses)
-        actions = np.broadcast_to(np.asarray(actions, dtype=np.int64), (len(x),))
-        out = np.empty(len(x))
-        for a in np.unique(actions):
-            sel = actions == a
-            out[sel] = gmm_log_likelihood(x[sel], self.weights_[a], self.means_[a], self.covariances_[a])
-        return out
-
-    def denoise(self, poses, actions, noise: float) -> np.ndarray:
-        """Posterior-mean root-relative poses ``(N, J, 3)`` under the prior and N(0, noise² I) observation noise."""
-        check_is_fitted(self, "weights_", msg=NOT_FITTED)
-        x = self._features(poses)
-        actions = np.broadcast_to(np.asarray(actions, dtype=np.int64), (len(x),))
-        out = np.empty_like(x)
-        eye = np.eye(x.shape[1]) * noise**2
-        for i, (xi, a) in enumerate(zip(x, actions)):
-            # the observation's marginal under component c is N(mu_c, S_c + noise² I)
-            logs, means = [], []
-            for w, mu, cov in zip(self.weights_[a], self.means_[a], self.covariances_[a]):
-                s = cov + eye
-                logs.append(np.log(w) + gmm_log_likelihood(xi[None], np.ones(1), mu[None], s[None])[0])
-                means.append(mu + cov @ np.linalg.solve(s, xi - mu))
-            r = np.exp(np.array(logs) - max(logs))
-            out[i] = (r[:, None] * np.array(means)).sum(0) / r.sum()
-        original = np.asarray(poses, dtype=np.float64)
-        denoised = out.reshape(original.shape)
-        # back onto the input's own proportions: the repaired bone directions, the input's lengths
-        return with_bone_lengths(denoised, joint_bone_lengths(original, self.skeleton), self.skeleton).astype(np.float32)
-
-    def _features(self, poses) -> np.ndarray:
-        p = np.asarray(poses, dtype=np.float64)
-        if p.ndim != 3 or p.shape[-1] != 3:
-            raise ValueError(f"`poses` must have shape (N, J, 3); got {p.shape}.")
-        return _flat_root_relative(with_bone_lengths(p, np.broadcast_to(self.lengths_, p.shape[:2]), self.skeleton))
-
-    def save(self, path) -> None:
-        check_is_fitted(self, "weights_", msg=NOT_FITTED)
-        # float32 on disk halves the file; scores agree with float64 to ~1e-4 nats
-        arrays = {"weights": self.weights_, "means": self.means_, "covariances": self.covariances_, "lengths": self.lengths_}
-        save_state(path, {k: np.asarray(v, dtype=np.float32) for k, v in arrays.items()},
-                   pack_metadata(self, threshold_=self.threshold_))
-
-    @classmethod
-    def load(cls, path) -> "AnchorQuality":
-        tensors, metadata = load_state(path)
-        params, fitted = check_metadata(path, metadata, cls)
-        obj = cls(**params)
-        obj.weights_, obj.means_, obj.covariances_, obj.lengths_ = (
-            tensors[k].astype(np.float64) for k in ("weights", "means", "covariances", "lengths"))
-        obj.threshold_ = float(fitted["threshold_"])
-        return obj
-
-
-def _flat_root_relative(poses) -> np.ndarray:
-    p = np.asarray(poses, dtype=np.float64)
-    if p.ndim != 3 or p.shape[-1] != 3:
-        raise ValueError(f"`poses` must have shape (N, J, 3); got {p.shape}.")
-    return (p - p[:, :1]).reshape(len(p), -1)
-
