@@ -1,4 +1,5 @@
 """The three-step refiner: a tiny pipeline trained on real clips, splicing, do-no-harm, input kinds, errors."""
+import json
 import os
 import numpy as np
 import pytest
@@ -185,11 +186,12 @@ def test_inputs_that_cannot_be_metres_are_refused(humanact12, change, match):
 def test_threads_auto_one_for_small_batches_more_for_large_and_restored():
     import torch
 
-    from refiner.refinement.pipeline import AUTO_THREADS_BATCH, Refiner, _auto_threads
+    from refiner.refinement.inputs import AUTO_THREADS_BATCH, auto_threads
+    from refiner.refinement.pipeline import Refiner
 
-    assert _auto_threads(np.zeros((60, 24, 3))) == 1
-    assert _auto_threads(np.zeros((AUTO_THREADS_BATCH - 1, 60, 24, 3))) == 1
-    big = _auto_threads(np.zeros((AUTO_THREADS_BATCH, 60, 24, 3)))
+    assert auto_threads(np.zeros((60, 24, 3))) == 1
+    assert auto_threads(np.zeros((AUTO_THREADS_BATCH - 1, 60, 24, 3))) == 1
+    big = auto_threads(np.zeros((AUTO_THREADS_BATCH, 60, 24, 3)))
     assert 1 <= big <= 4 and (big > 1 or len(os.sched_getaffinity(0)) == 1)
     for bad in (0, -1, 1.5, True, "all"):
         with pytest.raises(ValueError, match="threads"):
@@ -200,3 +202,41 @@ def test_threads_auto_one_for_small_batches_more_for_large_and_restored():
     before = torch.get_num_threads()
     Refiner.pretrained("humanact12", split="train").refine(np.zeros((40, 30, 24, 3), np.float32) + 0.1 * np.arange(24)[:, None])
     assert torch.get_num_threads() == before
+
+
+def test_pretrained_gives_independent_copies(humanact12):
+    """Calibrating or editing one pretrained refiner changes no other, nor what refine() uses."""
+    import refiner
+
+    a, b = Refiner.pretrained("humanact12", split="train"), Refiner.pretrained("humanact12", split="train")
+    assert a is not b and a.anchor_quality is not b.anchor_quality and a.manifest is not b.manifest
+    before = b.anchor_quality.threshold_, [list(t) for t in b.transition_retimer.thresholds_]
+    clips = [humanact12[i].joints for i in range(0, 120, 6)]
+    a.calibrate(clips, [humanact12[i].action for i in range(0, 120, 6)])
+    a.flaw_classifier.threshold_ = 1e-6
+    assert a.anchor_quality.threshold_ != before[0]
+    assert (b.anchor_quality.threshold_, b.transition_retimer.thresholds_) == before
+    again = Refiner.pretrained("humanact12", split="train")
+    assert again.anchor_quality.threshold_ == before[0] and again.flaw_classifier.threshold_ == b.flaw_classifier.threshold_
+    clip = humanact12[100].crop(0, 60)
+    np.testing.assert_array_equal(refiner.refine(clip).joints, Refiner.pretrained("humanact12").refine(clip).joints)
+
+
+def test_thresholds_live_in_the_steps_and_travel_with_them(tiny_refiner, humanact12, tmp_path):
+    """A manifest's calibrated thresholds go to the steps (the given parts stay as they are); saving writes
+    each step's threshold once, and loading gives the same ones back."""
+    base, _ = tiny_refiner
+    parts = {k: getattr(base, k) for k in ("recognizer", "anchor_refiner", "transition_generator",
+                                           "transition_refiner", "anchor_concepts", "anchor_quality")}
+    own = base.anchor_quality.threshold_
+    hand = Refiner(**parts, action_names=base.action_names,
+                   manifest={"calibration": {"anchor_threshold": own - 5.0, "transition_threshold": 0.01}})
+    assert hand.anchor_quality.threshold_ == own - 5.0 and base.anchor_quality.threshold_ == own
+    assert hand.transition_retimer.threshold(7) == hand.transition_retimer.threshold(200) == 0.01
+    hand.save(tmp_path / "saved")
+    manifest = json.loads((tmp_path / "saved" / "manifest.json").read_text())
+    assert manifest["calibration"] == {"transition_thresholds": [[float("inf"), 0.01]]}  # the anchor's is in its file
+    back = Refiner.load(tmp_path / "saved")
+    assert back.anchor_quality.threshold_ == own - 5.0 and back.transition_retimer.thresholds_ == [[float("inf"), 0.01]]
+    clip = humanact12[700]
+    np.testing.assert_array_equal(back.refine(clip).joints, hand.refine(clip).joints)

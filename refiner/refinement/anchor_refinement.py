@@ -236,3 +236,34 @@ class AnchorRefiner(NetworkComponent):
                           torch.from_numpy(self.concept_poses_[concept : concept + 1]).to(device))
         return (pose[0].cpu().numpy() + origin[0]).astype(np.float32), concept - int(self.concept_offsets_[action])
 
+    def propose(self, joints: np.ndarray, anchors, k: int, action: int, generator) -> tuple[np.ndarray, tuple[int, int], int, float]:
+        """``joints (T, J, 3)`` with anchor ``k`` replaced by a new one (:meth:`refine_anchor`) and both
+        neighbouring transitions regenerated between it and its neighbours by ``generator`` (a fitted
+        :class:`~refiner.concepts.transitions.TransitionGenerator`; the paper's anchor refinement).
+
+        Returns
+        -------
+        proposal : ndarray (T, J, 3)
+        window : (int, int)
+            The frames ``lo <= t < hi`` it changes (:func:`masked_window`).
+        concept : int
+            The chosen concept among the action's.
+        moved_cm : float
+            Mean distance the anchor's joints moved.
+        """
+        frame = int(anchors[k])
+        pose, concept = self.refine_anchor(joints, anchors, k, action)
+        proposal = joints.copy()
+        proposal[frame] = pose
+        starts, ends, durations = [], [], []
+        if k > 0:
+            starts.append(joints[anchors[k - 1]]), ends.append(pose), durations.append(frame - int(anchors[k - 1]))
+        if k + 1 < len(anchors):
+            starts.append(pose), ends.append(joints[anchors[k + 1]]), durations.append(int(anchors[k + 1]) - frame)
+        pieces = generator.generate(np.stack(starts), np.stack(ends), np.array(durations))
+        if k > 0:
+            proposal[anchors[k - 1] : frame + 1] = pieces[0]
+        if k + 1 < len(anchors):
+            proposal[frame : anchors[k + 1] + 1] = pieces[-1]
+        moved_cm = 100 * float(np.linalg.norm(pose - joints[frame], axis=-1).mean())
+        return proposal, masked_window(len(joints), anchors, k), concept, moved_cm

@@ -19,6 +19,7 @@ from refiner.core.output_kind import like_input
 from refiner.core.skeleton_conversion import convert, estimated_joints
 from refiner.core.skeletons import get_skeleton, rigid_skeleton
 from refiner.core.validation import check_joints
+from refiner.refinement.inputs import MIN_FRAMES, check_metres_each, thread_limits
 
 __all__ = ["ConvertedRefiner", "FLEXIBLE_BONES"]
 
@@ -87,14 +88,10 @@ class ConvertedRefiner:
         action-agnostic, and the report says so. A :class:`~refiner.core.motion.Motion`'s own action is
         such a label too.
         """
-        from refiner.refinement.pipeline import thread_limits
-
         with thread_limits(self.threads_for(seq)):
             return self._refine(seq, action, mode, return_report)
 
     def _refine(self, seq, action, mode, return_report):
-        from refiner.refinement.pipeline import MIN_FRAMES, check_metres_each
-
         if isinstance(seq, Motion):
             if seq.skeleton != self.skeleton:
                 raise ValueError(f"this refiner is for skeleton {self.skeleton!r}; got a {seq.skeleton!r} motion.")

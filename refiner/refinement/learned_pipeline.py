@@ -27,7 +27,10 @@ import numpy as np
 
 from refiner.core.skeletons import get_skeleton, rigid_skeleton
 from refiner.refinement.anchor_recognition import anchor_peaks
+from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES
+from refiner.refinement.report import RefinementReport, start_reports
+from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
 from refiner.refinement.training_flaws import GROUPS
 
 __all__ = ["flag_runs", "refine_batch", "check_detect", "REPAIRS", "DETECTORS"]
@@ -156,7 +159,6 @@ def _select(refiner, y, spliced: dict, lo: int, hi: int) -> tuple[str, str]:
 
 def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
     """Repair one flagged run; returns ``(repair name, (start, stop), new clip, note)``."""
-    from refiner.refinement.pipeline import _reference_lengths, project_bone_lengths, splice
 
     def spliced(proposal, a, c):
         return splice(y, proposal, a, c, blend=refiner.blend, keep_start=a > 0, keep_end=c < len(y))
@@ -196,7 +198,7 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
     span = (min(a for a, _ in windows.values()), max(c for _, c in windows.values()))
     touched = np.zeros(len(y), bool)
     touched[span[0] : span[1]] = True
-    reference = _reference_lengths(original, refiner.skeleton)
+    reference = reference_lengths(original, refiner.skeleton)
     candidates = {n: project_bone_lengths(c, reference, touched, refiner.skeleton) for n, c in candidates.items()}
     name, note = _select(refiner, y, candidates, *span)
     if name == "keep":
@@ -205,11 +207,14 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
     return name, window, candidates[name], note
 
 
-def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
-    """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
-    from refiner.refinement.pipeline import _reference_lengths, project_bone_lengths
-
-    clips = clips.copy()
+def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, batched: bool
+                 ) -> tuple[list[np.ndarray], list[RefinementReport]]:
+    """Refine ``clips (B, T, J, 3)`` with ``refiner``'s learned steps, the whole batch at once."""
+    reports = start_reports(clips.shape[1], actions, mode, refiner.action_names, batched=batched)
+    actions = [r.action for r in reports]  # indices now (None: to infer)
+    clips = np.array(clips, dtype=np.float32, copy=True)
+    if clips.shape[1] < MIN_FRAMES:  # returned as given (the reports say so)
+        return list(clips), reports
     for b, report in enumerate(reports):  # first the bones: a stretching skeleton is not a motion flaw
         rigid, variation = rigid_skeleton(clips[b], refiner.skeleton, refiner.rigid_tolerance)
         if variation > refiner.rigid_tolerance:
@@ -301,5 +306,5 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                     report.refined_anchors.extend({"frame": a, "method": name} for a in inside)
                 else:
                     report.flagged_transitions.append([lo, hi])
-            out[b] = project_bone_lengths(y, _reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
-    return out
+            out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
+    return list(out), reports

@@ -1,0 +1,84 @@
+"""What ``refine()`` checks in its input and options, and the threads it runs with."""
+from __future__ import annotations
+
+import numbers
+import os
+from contextlib import contextmanager
+
+import numpy as np
+import torch
+from threadpoolctl import threadpool_limits
+
+__all__ = ["MODES", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_metres",
+           "check_metres_each", "check_threads", "thread_limits"]
+
+#: Which refinement steps run after recognition.
+MODES = ("full", "anchor", "transition")
+#: Shortest clip refined; shorter ones pass through unchanged (reported).
+MIN_FRAMES = 8
+#: ``threads="auto"`` uses more than one thread from this many clips in a batch on.
+AUTO_THREADS_BATCH = 32
+
+
+def check_choice(name: str, value: str, choices) -> str:
+    """``value`` if it is one of ``choices``, else a ``ValueError`` naming the option and the choices."""
+    if value not in choices:
+        raise ValueError(f"unknown {name} {value!r}; known: {', '.join(choices)}.")
+    return value
+
+
+def check_threads(threads):
+    """A positive int, ``"auto"`` or None (``ValueError`` otherwise); numpy integers become ints."""
+    if not (threads is None or (isinstance(threads, str) and threads == "auto")
+            or (isinstance(threads, numbers.Integral) and not isinstance(threads, (bool, np.bool_)) and threads >= 1)):
+        raise ValueError(f"`threads` must be a positive int, 'auto' or None; got {threads!r}.")
+    return threads if threads is None or isinstance(threads, str) else int(threads)
+
+
+def auto_threads(seq) -> int:
+    """One thread for a clip or a small batch, the available cores (at most 4) for a large one."""
+    shape = getattr(seq, "shape", None)
+    if shape is None and isinstance(seq, (list, tuple)):
+        shape = np.shape(seq)
+    if shape is None or len(shape) != 4 or shape[0] < AUTO_THREADS_BATCH:
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(4, cores))
+
+
+@contextmanager
+def thread_limits(threads: int | None):
+    """torch intra-op and BLAS threads set to ``threads`` inside the block, restored after (None: untouched)."""
+    if threads is None:
+        yield
+        return
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        with threadpool_limits(threads):  # under load, free BLAS threads made a call 3-12x slower
+            yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def check_metres_each(clips: np.ndarray, skel, batched: bool) -> None:
+    """:func:`check_metres` per clip of ``clips (B, T, J, 3)`` (one clip in centimetres must not hide in a
+    batch's median), naming the clip when the input was a batch."""
+    for i, clip in enumerate(clips):
+        try:
+            check_metres(clip, skel)
+        except ValueError as e:
+            if not batched:
+                raise
+            raise ValueError(f"clip {i} of {len(clips)}: {e}") from e
+
+
+def check_metres(x: np.ndarray, skel) -> None:
+    """Refuse joints that cannot be metres: huge values, or bones metres long (centimetres given)."""
+    extent = float(np.abs(x).max())
+    if extent > 1e3:
+        raise ValueError(f"`seq` has coordinates up to {extent:.3g}; joints must be in metres (|x| < 1000).")
+    median = float(np.median(skel.bone_lengths(x)))
+    if median > 1.5:
+        raise ValueError(f"`seq` has bones of {median:.3g} units median length; joints must be in metres "
+                         "(centimetres: divide by 100).")
