@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.segmentation import DEFAULT_PENALTY, Segmentation, segment
@@ -91,8 +92,6 @@ class MotionConcepts:
 
 def segment_dataset(dataset: MotionDataset, *, penalty: float = DEFAULT_PENALTY, progress: bool = False) -> list[Segmentation]:
     """Segment every clip of a dataset (clips shorter than a transition give one anchor pair)."""
-    from tqdm.auto import tqdm
-
     return [segment(m.joints, penalty=penalty) for m in tqdm(dataset.motions, desc="segment", disable=not progress)]
 
 

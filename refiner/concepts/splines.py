@@ -64,7 +64,7 @@ def eval_spline(coeffs, n_frames: int):
     if isinstance(coeffs, np.ndarray):
         basis = spline_basis(n_frames).astype(coeffs.dtype)
         return np.einsum("lk,...kjc->...ljc", basis, coeffs)
-    import torch
+    import torch  # only for tensors: the numpy segmentation must not wait for torch to import
 
     basis = spline_basis(n_frames, xp=torch, dtype=coeffs.dtype).to(coeffs.device)
     return torch.einsum("lk,...kjc->...ljc", basis, coeffs)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["smoothstep", "resample", "linear_infill", "window_starts", "triangular_weights", "overlap_add"]
+__all__ = ["smoothstep", "resample", "linear_infill", "window_starts", "triangular_weights", "overlap_add", "run_peak"]
 
 
 def smoothstep(u):
@@ -78,3 +78,11 @@ def overlap_add(windows: np.ndarray, starts, n_frames: int, weights: np.ndarray 
         total[s : s + size] += weights.reshape((size,) + per_frame) * windows[k]
         wsum[s : s + size] += weights
     return total / wsum.reshape((n_frames,) + per_frame)
+
+
+def run_peak(values: np.ndarray, min_run: int) -> float:
+    """The largest value that ``min_run`` consecutive entries of ``values (T,)`` all reach."""
+    if len(values) < min_run:
+        return float(values.min())
+    windows = np.lib.stride_tricks.sliding_window_view(values, min_run)
+    return float(windows.min(-1).max())

@@ -14,7 +14,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from refiner.core.skeletons import rigid_skeleton
+from refiner.core.signal import run_peak
+from refiner.core.skeletons import get_skeleton, rigid_skeleton
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.training import TrainSchedule, crop_start, fit_network, resolve_device, seeded, to_device
@@ -126,7 +127,7 @@ class FlawClassifier(NetworkComponent):
     def fit(self, clips, *, skeleton: str = "humanact12", validation=None, checkpoint=None) -> "FlawClassifier":
         """Train on real clips ``(T_i, J, 3)`` metres with synthetic flaws; ``validation``: held-out clips."""
         rng = check_random_state(self.random_state)
-        self.skeleton_ = get_name(skeleton)
+        self.skeleton_ = get_skeleton(skeleton).name
         self.threshold_ = 0.5
         train = self._examples(list(clips), rng, self.copies)
         val = self._examples(list(validation if validation is not None else clips)[:200], np.random.default_rng(7), 2)
@@ -164,9 +165,7 @@ class FlawClassifier(NetworkComponent):
 
     def calibrate(self, clips, *, clip_rate: float = 0.05, min_run: int = 2) -> float:
         """Set ``threshold_`` so that at most ``clip_rate`` of these clean clips have ``min_run`` frames above it."""
-        from refiner.refinement.learned_refinement import _run_peak
-
-        peaks = [_run_peak(self.predict(np.asarray(c)[None])[0], min_run) for c in clips]
+        peaks = [run_peak(self.predict(np.asarray(c)[None])[0], min_run) for c in clips]
         self.threshold_ = float(min(max(np.quantile(peaks, 1 - clip_rate), 0.05), 0.999))
         return self.threshold_
 
@@ -178,9 +177,3 @@ def _loss(net, batch, rng) -> torch.Tensor:
     flaw = (bce[..., 0] * w).sum() / w.sum().clamp_min(1.0)
     on = w * label[..., 0]
     return flaw + 0.5 * (bce[..., 1:].mean(-1) * on).sum() / on.sum().clamp_min(1.0)
-
-
-def get_name(skeleton) -> str:
-    from refiner.core.skeletons import get_skeleton
-
-    return get_skeleton(skeleton).name

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from refiner.core.signal import linear_infill, overlap_add, triangular_weights, window_starts
+from refiner.core.signal import linear_infill, overlap_add, run_peak, triangular_weights, window_starts
 from refiner.core.skeletons import get_skeleton
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
@@ -189,7 +189,7 @@ class FlawRecognizer(_LearnedStep):
     def calibrate(self, clips, actions, *, clip_rate: float = 0.05, min_run: int = 2) -> float:
         """Set ``threshold_`` so that at most ``clip_rate`` of these *clean* clips (held-out subjects)
         have a run of ``min_run`` frames above it; returns the threshold."""
-        peaks = [_run_peak(self.predict(np.asarray(c, np.float32)[None], [a])["flaw"][0], min_run)
+        peaks = [run_peak(self.predict(np.asarray(c, np.float32)[None], [a])["flaw"][0], min_run)
                  for c, a in zip(clips, actions)]
         self.threshold_ = float(min(max(np.quantile(peaks, 1 - clip_rate), 0.05), 0.99))
         return self.threshold_
@@ -280,15 +280,7 @@ class FlawRepairer(_LearnedStep):
     def calibrate(self, clips, actions, *, clip_rate: float = 0.05, min_run: int = 2) -> float:
         """Set ``correction_threshold_`` so that at most ``clip_rate`` of these clean clips (held-out
         subjects) have a run of ``min_run`` frames above it; returns the threshold (metres)."""
-        peaks = [_run_peak(self.correction(np.asarray(c, np.float32)[None], [a])[0], min_run)
+        peaks = [run_peak(self.correction(np.asarray(c, np.float32)[None], [a])[0], min_run)
                  for c, a in zip(clips, actions)]
         self.correction_threshold_ = float(np.quantile(peaks, 1 - clip_rate))
         return self.correction_threshold_
-
-
-def _run_peak(values: np.ndarray, min_run: int) -> float:
-    """The largest value that ``min_run`` consecutive entries of ``values (T,)`` all reach."""
-    if len(values) < min_run:
-        return float(values.min())
-    windows = np.lib.stride_tricks.sliding_window_view(values, min_run)
-    return float(windows.min(-1).max())

@@ -10,7 +10,11 @@ import warnings
 from dataclasses import replace
 from typing import Any, Callable, Mapping
 
+import numpy as np
+
 from refiner.core.motion import Motion
+from refiner.core.validation import check_action
+from refiner.io.datasets import HUMANACT12_ACTIONS
 
 __all__ = ["RefinedGenerator", "identity_refiner"]
 
@@ -80,6 +84,7 @@ class RefinedGenerator:
         adapter_options: Mapping[str, Any] | None = None,
         plugin_manager: Any = None,
     ) -> None:
+        # the plugin machinery loads when a generator is wrapped, not on `import refiner`
         from refiner.plugins.manager import get_plugin_manager
 
         self.generator = generator
@@ -195,6 +200,7 @@ class RefinedGenerator:
 def _default_refiner(skeleton: str):
     """``refiner.refinement.pipeline.Refiner.pretrained(skeleton)``, or the identity with a warning if unavailable."""
     try:
+        # on first use: the pipeline brings torch and the networks, which `import refiner` must not load
         from refiner.refinement.pipeline import Refiner
 
         pretrained = Refiner.pretrained
@@ -215,16 +221,11 @@ def _default_refiner(skeleton: str):
 
 def _action_index(action: Any, skeleton: str) -> int | None:
     """The action as a label index when it is one (or a HumanAct12 action name), else None."""
-    import numpy as np
-
     if isinstance(action, (bool, np.bool_)):
         return None
     if isinstance(action, (int, np.integer)):
         return int(action) if action >= 0 else None
     if isinstance(action, str) and skeleton == "humanact12":
-        from refiner.core.validation import check_action
-        from refiner.io.datasets import HUMANACT12_ACTIONS
-
         try:
             return check_action(action, HUMANACT12_ACTIONS)
         except ValueError:

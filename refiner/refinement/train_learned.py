@@ -18,6 +18,7 @@ from refiner.concepts.segmentation import segment
 from refiner.io.datasets import MotionDataset
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
+from refiner.refinement.pipeline import _WEIGHTS, Refiner
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "train_learned", "train_learned_refiner", "install_learned",
            "calibrate_learned", "calibration_split", "CLIP_RATE"]
@@ -118,8 +119,6 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
 
     The manifest records, under ``learned``, how they were trained (``info``) and the flaw threshold.
     """
-    from refiner.refinement.pipeline import Refiner
-
     refiner = Refiner.load(folder, method="concepts")
     refiner.flaw_classifier = parts["flaw_classifier"]
     refiner.flaw_recognizer = parts["flaw_recognizer"]
@@ -135,8 +134,6 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
                           only: str | None = None, **kwargs):
     """Train the learned steps (:func:`train_learned`) and save them with the parts of the refiner in
     ``base`` (default: the shipped weights of ``split``) to ``out``; None when ``only`` trains one part."""
-    from refiner.refinement.pipeline import _WEIGHTS
-
     parts = train_learned(dataset, out, split=split, only=only, **kwargs)
     if only is not None:
         return None

@@ -10,6 +10,7 @@ import numpy as np
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.learning import learn_concepts
+from refiner.concepts.segmentation import segment
 from refiner.concepts.transitions import TransitionGenerator
 from refiner.io.datasets import MotionDataset
 from refiner.nn.training import TrainSchedule
@@ -80,8 +81,6 @@ def train_refiner(
     data = dataset.split(split)
     clips = [m.joints for m in data]
     actions = data.actions
-    from refiner.concepts.segmentation import segment
-
     segs = [segment(c, penalty=concepts.config["penalty"]) for c in clips]
     anchors = [s.anchors for s in segs]
     common = dict(schedule=TrainSchedule(device=device, progress=progress, max_seconds=max_seconds, **cfg["schedule"]),
