@@ -155,3 +155,12 @@ def test_anchor_refiner_uses_the_validation_clips(synthetic):
 def _recognizer_data(data):
     clips, segs, actions, _ = data
     return clips, [s.anchors for s in segs], actions
+
+
+def test_transition_refiner_calibrate_sets_its_one_threshold(synthetic):
+    model = _fitted("transition_refiner", synthetic)
+    clips, anchors, _ = _recognizer_data(synthetic)
+    loose, strict = model.calibrate(clips, anchors, percentile=50.0), model.calibrate(clips, anchors, percentile=1.0)
+    assert strict == model.threshold_ and loose <= strict
+    flagged = [r > strict for c, a in zip(clips, anchors) for r in model.refine_transitions(c, a)[1]]
+    assert np.mean(flagged) < 0.1  # about 1 % of these real transitions are above it

@@ -30,14 +30,14 @@ from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.report import RefinementReport, start_reports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
 
-__all__ = ["QUALITY", "ANCHOR_METHODS", "TRANSITION_METHODS", "refine_batch", "calibrate"]
+__all__ = ["QUALITY", "ANCHOR_METHODS", "TRANSITION_METHODS", "refine_clips", "calibrate"]
 
 QUALITY = ("pose", "encoder")
 ANCHOR_METHODS = ("posterior", "concept")
 TRANSITION_METHODS = ("network", "retime")
 
 
-def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, batched: bool
+def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: bool
                  ) -> tuple[list[np.ndarray], list[RefinementReport]]:
     """Refine ``clips (B, T, J, 3)`` one by one with ``refiner``'s concept steps; a batch's errors name the clip."""
     reports = start_reports(clips.shape[1], actions, mode, refiner.action_names, batched=batched)

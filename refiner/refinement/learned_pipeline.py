@@ -33,7 +33,7 @@ from refiner.refinement.report import RefinementReport, start_reports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
 from refiner.refinement.training_flaws import GROUPS
 
-__all__ = ["flag_runs", "refine_batch", "check_detect", "REPAIRS", "DETECTORS"]
+__all__ = ["flag_runs", "refine_clips", "refine_batch", "check_detect", "REPAIRS", "DETECTORS"]
 
 #: ``repair="typed"``: per flagged run, the repair for the flaw group the classifier recognises
 #: (:data:`TYPED_REPAIRS`); ``"select"``: per flagged run, the candidate (the repair network's two proposals, the
@@ -207,14 +207,20 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
     return name, window, candidates[name], note
 
 
-def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, batched: bool
+def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: bool
                  ) -> tuple[list[np.ndarray], list[RefinementReport]]:
-    """Refine ``clips (B, T, J, 3)`` with ``refiner``'s learned steps, the whole batch at once."""
+    """Refine ``clips (B, T, J, 3)`` with ``refiner``'s learned steps, the whole batch at once; their
+    given ``actions`` (None: to infer) are checked first (a batch's errors name the clip)."""
     reports = start_reports(clips.shape[1], actions, mode, refiner.action_names, batched=batched)
-    actions = [r.action for r in reports]  # indices now (None: to infer)
-    clips = np.array(clips, dtype=np.float32, copy=True)
-    if clips.shape[1] < MIN_FRAMES:  # returned as given (the reports say so)
-        return list(clips), reports
+    x = np.array(clips, dtype=np.float32, copy=True)
+    if x.shape[1] < MIN_FRAMES:  # returned as given (the reports say so)
+        return list(x), reports
+    return list(refine_batch(refiner, x, [r.action for r in reports], mode, reports)), reports
+
+
+def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
+    """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
+    clips = clips.copy()
     for b, report in enumerate(reports):  # first the bones: a stretching skeleton is not a motion flaw
         rigid, variation = rigid_skeleton(clips[b], refiner.skeleton, refiner.rigid_tolerance)
         if variation > refiner.rigid_tolerance:
@@ -307,4 +313,4 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
                 else:
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
-    return list(out), reports
+    return out

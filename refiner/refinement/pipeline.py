@@ -223,7 +223,7 @@ class Refiner:
             if seq.skeleton != self.skeleton:
                 raise ValueError(f"this refiner is for skeleton {self.skeleton!r}; got a {seq.skeleton!r} motion.")
             check_metres(seq.joints, get_skeleton(seq.skeleton))
-            outs, reports = steps.refine_batch(self, seq.joints[None], [seq.action if action is None else action],
+            outs, reports = steps.refine_clips(self, seq.joints[None], [seq.action if action is None else action],
                                                mode, False)
             result, report = seq.with_joints(outs[0]), reports[0]
             if result.action is None and report.action is not None:
@@ -236,7 +236,7 @@ class Refiner:
         actions = action if (batched and isinstance(action, (list, tuple, np.ndarray))) else [action] * len(clips)
         if len(actions) != len(clips):
             raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
-        outs, reports = steps.refine_batch(self, clips, list(actions), mode, batched)
+        outs, reports = steps.refine_clips(self, clips, list(actions), mode, batched)
         out = like_input(np.stack(outs) if batched else outs[0], seq, x)
         return (out, reports if batched else reports[0]) if return_report else out
 

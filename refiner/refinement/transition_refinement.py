@@ -176,12 +176,19 @@ class TransitionRefiner(NetworkComponent):
             val_batch = make_batch(np.arange(len(val_idx)), np.random.default_rng(0), val_idx, False)
             self.history_ = fit_network(self.network_, self._loss, make_batch, len(tr_idx), val_batch,
                                         schedule, rng, desc="transition refinement")
-        residuals = []
-        for i in val_idx:
-            _, per_transition = self._refine_clip(clips[i], anchors[i])
-            residuals.extend(per_transition)
-        self.threshold_ = float(np.percentile(residuals, 100 - self.flaw_percentile))
+        self.calibrate([clips[i] for i in val_idx], [anchors[i] for i in val_idx])
         return self
+
+    def calibrate(self, clips, anchors, *, percentile: float | None = None) -> float:
+        """Set ``threshold_`` to the ``100 - percentile``-th percentile (default ``flaw_percentile``) of the
+        residuals of real transitions (``clips`` ``(T_i, J, 3)`` metres between their ``anchors``); returns it."""
+        check_is_fitted(self, "network_", msg=NOT_FITTED)
+        residuals = []
+        for clip, a in zip(clips, anchors):
+            residuals.extend(self._refine_clip(np.asarray(clip, dtype=np.float32), a)[1])
+        percentile = self.flaw_percentile if percentile is None else percentile
+        self.threshold_ = float(np.percentile(residuals, 100 - percentile))
+        return self.threshold_
 
     def _batch(self, clip_ids, clips, anchors, splines, rng, corrupt) -> dict:
         length, joints = self.crop_frames, self.n_joints_
