@@ -94,26 +94,23 @@ class AnchorConcepts(BaseEstimator):
 
     def predict(self, poses, actions) -> np.ndarray:
         """Index of the nearest concept of each pose's action, ``(N,)`` int."""
-        check_is_fitted(self, msg=_NOT_FITTED)
-        x = root_relative(check_joints(poses, name="poses", min_frames=1))
-        actions = self._check_actions(actions, len(x))
-        out = np.empty(len(x), dtype=np.int64)
-        for a in np.unique(actions):
-            sel = actions == a
-            d = np.linalg.norm(x[sel][:, None] - self.centers_[a][None], axis=-1).mean(-1)  # (n, K) MPJPE
-            out[sel] = d.argmin(1)
-        return out
+        return self._nearest(poses, actions)[0]
 
     def distance(self, poses, actions) -> np.ndarray:
         """MPJPE (metres) from each root-relative pose to its nearest concept, ``(N,)``."""
+        return self._nearest(poses, actions)[1]
+
+    def _nearest(self, poses, actions) -> tuple[np.ndarray, np.ndarray]:
+        """Index of, and MPJPE to, the nearest concept of each pose's action."""
         check_is_fitted(self, msg=_NOT_FITTED)
         x = root_relative(check_joints(poses, name="poses", min_frames=1))
         actions = self._check_actions(actions, len(x))
-        out = np.empty(len(x), dtype=np.float64)
+        index, distance = np.empty(len(x), dtype=np.int64), np.empty(len(x), dtype=np.float64)
         for a in np.unique(actions):
             sel = actions == a
-            out[sel] = np.linalg.norm(x[sel][:, None] - self.centers_[a][None], axis=-1).mean(-1).min(1)
-        return out
+            d = np.linalg.norm(x[sel][:, None] - self.centers_[a][None], axis=-1).mean(-1)  # (n, K) MPJPE
+            index[sel], distance[sel] = d.argmin(1), d.min(1)
+        return index, distance
 
     def concept(self, action: int, index: int) -> np.ndarray:
         """The root-relative pose ``(J, 3)`` of one concept."""

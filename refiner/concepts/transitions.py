@@ -194,7 +194,7 @@ class TransitionGenerator(NetworkComponent):
     max_frames : int, default=120
         Longest transition used for training (longer ones are skipped).
     schedule : TrainSchedule, default=TrainSchedule(n_epochs=300, patience=20)
-        How the network is trained (epochs, batch size, learning rate, device, ...).
+        Epochs, batch size, learning rate, device, ... (:class:`~refiner.nn.training.TrainSchedule`).
     random_state : int or None, default=0
 
     Attributes

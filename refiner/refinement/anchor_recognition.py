@@ -32,7 +32,7 @@ from refiner.nn.training import ClipCrops, TrainSchedule, fit_network, resolve_d
 # AnchorQuality (the pose-plausibility score of the same anchors) is importable from here as well: the 0.1
 # module refiner.recognition, which now means this one, held both
 from refiner.refinement.anchor_quality import AnchorQuality, gmm_log_likelihood  # noqa: F401
-from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig
+from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig, encoder_config
 
 __all__ = ["AnchorRecognizer", "AnchorRecognitionNet", "Recognition", "anchor_peaks", "anchor_targets", "match_anchors"]
 
@@ -124,7 +124,7 @@ class AnchorRecognizer(NetworkComponent):
     action_weight : float, default=0.2
         Weight of the action cross-entropy beside the anchor BCE.
     schedule : TrainSchedule, default=TrainSchedule()
-        How the network is trained (epochs, batch size, learning rate, device, ...).
+        Epochs, batch size, learning rate, device, ... (:class:`~refiner.nn.training.TrainSchedule`).
     random_state : int or None, default=0
 
     Attributes
@@ -158,9 +158,7 @@ class AnchorRecognizer(NetworkComponent):
         self.random_state = random_state
 
     def _make_network(self, fitted: dict) -> AnchorRecognitionNet:
-        cfg = MotionEncoderConfig(fitted["n_joints_"] * 3, self.d_model, self.n_layers, self.n_heads, self.ffn_dim,
-                                  self.dropout, max_len=4 * self.crop_frames)
-        return AnchorRecognitionNet(cfg, fitted["n_actions_"])
+        return AnchorRecognitionNet(encoder_config(self, fitted["n_joints_"]), fitted["n_actions_"])
 
     def fit(self, clips, anchors, actions, *, n_actions: int | None = None, validation=None) -> "AnchorRecognizer":
         """Train on real clips and their segmentation anchors.

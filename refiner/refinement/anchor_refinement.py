@@ -21,7 +21,7 @@ from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.layers import MLP, mpjpe
 from refiner.nn.training import TrainSchedule, crop_start, fit_network, put_crop, resolve_device, seeded, to_device
-from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig
+from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig, encoder_config
 
 __all__ = ["AnchorRefiner", "AnchorRefinementNet", "masked_window"]
 
@@ -76,7 +76,7 @@ class AnchorRefiner(NetworkComponent):
         at 1.0 the held-out cross-entropy (rising after ~15 epochs) drove early stopping long
         before the anchor MPJPE stopped improving.
     schedule : TrainSchedule, default=TrainSchedule()
-        How the network is trained (epochs, batch size, learning rate, device, ...).
+        Epochs, batch size, learning rate, device, ... (:class:`~refiner.nn.training.TrainSchedule`).
     random_state : int or None, default=0
 
     Attributes
@@ -107,10 +107,8 @@ class AnchorRefiner(NetworkComponent):
         self.random_state = random_state
 
     def _make_network(self, fitted: dict) -> AnchorRefinementNet:
-        cfg = MotionEncoderConfig(fitted["n_joints_"] * 3, self.d_model, self.n_layers, self.n_heads, self.ffn_dim,
-                                  self.dropout, max_len=4 * self.crop_frames)
         n_concepts = int(np.asarray(self.concept_offsets_)[-1])
-        return AnchorRefinementNet(cfg, n_concepts, fitted["n_joints_"])
+        return AnchorRefinementNet(encoder_config(self, fitted["n_joints_"]), n_concepts, fitted["n_joints_"])
 
     def fit(self, clips, anchors, actions, concepts: AnchorConcepts, *, validation=None) -> "AnchorRefiner":
         """Train on real clips, their segmentation anchors and fitted anchor concepts.

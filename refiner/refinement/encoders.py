@@ -15,7 +15,7 @@ from torch import nn
 
 from refiner.nn.layers import sinusoidal_positions
 
-__all__ = ["MotionEncoderConfig", "MotionEncoder"]
+__all__ = ["MotionEncoderConfig", "MotionEncoder", "encoder_config"]
 
 
 @dataclass
@@ -72,3 +72,10 @@ class MotionEncoder(nn.Module):
         memory = self.encoder(h, src_key_padding_mask=pad)
         queries = pos.expand(x.shape[0], -1, -1)
         return self.decoder(queries, memory, tgt_key_padding_mask=pad, memory_key_padding_mask=pad)
+
+
+def encoder_config(component, n_joints: int) -> MotionEncoderConfig:
+    """The motion encoder of a §3.2 component (its ``d_model``, ``n_layers``, ``n_heads``, ``ffn_dim``,
+    ``dropout`` and ``crop_frames``) for ``n_joints`` joints; positions for four crops (inference windows are two)."""
+    return MotionEncoderConfig(n_joints * 3, component.d_model, component.n_layers, component.n_heads, component.ffn_dim,
+                               component.dropout, max_len=4 * component.crop_frames)

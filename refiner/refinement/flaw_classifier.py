@@ -61,7 +61,7 @@ class FlawClassifier(NetworkComponent):
         (:func:`refiner.core.skeletons.rigid_skeleton`), so training crops get the same
         treatment after their flaws (None: not); the labels are what is left of the flaw.
     schedule : TrainSchedule, default=TrainSchedule(n_epochs=30, batch_size=64, learning_rate=1e-3, patience=8, steps_per_epoch=100)
-        How the network is trained (epochs, batch size, learning rate, device, ...).
+        Epochs, batch size, learning rate, device, ... (:class:`~refiner.nn.training.TrainSchedule`).
     random_state : int or None, default=0
 
     Attributes

@@ -25,7 +25,7 @@ from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.layers import MLP, mpjpe
 from refiner.nn.training import TrainSchedule, crop_start, fit_network, put_crop, resolve_device, seeded, to_device
-from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig
+from refiner.refinement.encoders import MotionEncoder, MotionEncoderConfig, encoder_config
 
 __all__ = ["TransitionRefiner", "TransitionRefinementNet", "transition_layout", "corrupt_transition"]
 
@@ -111,7 +111,7 @@ class TransitionRefiner(NetworkComponent):
         Share of training inputs with a corrupted transition (0 = the paper's variant).
     flaw_percentile : float, default=1.0
     schedule : TrainSchedule, default=TrainSchedule()
-        How the network is trained (epochs, batch size, learning rate, device, ...).
+        Epochs, batch size, learning rate, device, ... (:class:`~refiner.nn.training.TrainSchedule`).
     random_state : int or None, default=0
 
     Attributes
@@ -143,9 +143,7 @@ class TransitionRefiner(NetworkComponent):
         self.random_state = random_state
 
     def _make_network(self, fitted: dict) -> TransitionRefinementNet:
-        cfg = MotionEncoderConfig(fitted["n_joints_"] * 3, self.d_model, self.n_layers, self.n_heads, self.ffn_dim,
-                                  self.dropout, max_len=4 * self.crop_frames)
-        return TransitionRefinementNet(cfg, fitted["n_joints_"], self.max_transitions)
+        return TransitionRefinementNet(encoder_config(self, fitted["n_joints_"]), fitted["n_joints_"], self.max_transitions)
 
     def fit(self, clips, anchors, coeffs) -> "TransitionRefiner":
         """Train on real clips with their segmentation anchors and fitted spline coefficients.
