@@ -11,7 +11,7 @@ transition starts exactly at its start anchor; ``L_A`` pulls ``a + b + c + d`` t
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from typing import Sequence
 
 import numpy as np

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import torch
-from einops import rearrange
 from torch import nn
 
 from refiner.nn.layers import sinusoidal_positions
