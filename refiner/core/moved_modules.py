@@ -51,7 +51,7 @@ MOVED = {
     "output_kind": "core.output_kind",
     "physics": "evaluation.physics",
     "pipeline": "refinement.pipeline",
-    "recognition": "refinement.recognition",
+    "recognition": "refinement.anchor_recognition",
     "reference_generators": "reference",
     "repair_candidates": "refinement.repair_candidates",
     "safe_pickle": "core.safe_pickle",
