@@ -11,9 +11,9 @@ from refiner.concepts.segmentation import segment
 from refiner.concepts.transitions import TransitionGenerator, collect_transitions
 from refiner.core.validation import NotFittedError
 from refiner.nn.training import TrainSchedule
-from refiner.refinement.anchor_refinement import AnchorRefiner
 from refiner.refinement.anchor_quality import gmm_log_likelihood
 from refiner.refinement.anchor_recognition import AnchorRecognizer, anchor_targets, match_anchors
+from refiner.refinement.anchor_refinement import AnchorRefiner
 from refiner.refinement.transition_refinement import TransitionRefiner, transition_layout
 
 SCHEDULE = TrainSchedule(n_epochs=2, steps_per_epoch=1, batch_size=8, device="cpu")

@@ -14,6 +14,7 @@ from refiner.reference import (
     load_reference_generator,
 )
 from refiner.core.validation import NotFittedError
+from refiner.nn.training import TrainSchedule
 
 TINY = {
     LieVAEGenerator: dict(hidden=16, latent_dim=4),
@@ -34,7 +35,8 @@ def small_set(humanact12):
 
 @pytest.fixture(scope="module")
 def tiny_fitted(small_set):
-    return {cls: cls(**TINY[cls], n_epochs=2, steps_per_epoch=2, batch_size=8, device="cpu", random_state=0).fit(small_set)
+    return {cls: cls(**TINY[cls], schedule=TrainSchedule(n_epochs=2, steps_per_epoch=2, batch_size=8, device="cpu"),
+                    random_state=0).fit(small_set)
             for cls in TINY}
 
 
@@ -96,9 +98,9 @@ def test_unfitted_and_bad_arguments(tiny_clip):
         with pytest.raises(NotFittedError):
             cls().sample(0)
         with pytest.raises(ValueError, match="action label"):
-            cls(**TINY[cls], n_epochs=1).fit([Motion(tiny_clip)])
+            cls(**TINY[cls], schedule=TrainSchedule(n_epochs=1)).fit([Motion(tiny_clip)])
         with pytest.raises(ValueError, match="n_epochs"):
-            cls(n_epochs=0).fit([Motion(tiny_clip, action=1)])
+            cls(schedule=TrainSchedule(n_epochs=0)).fit([Motion(tiny_clip, action=1)])
     with pytest.raises(ValueError, match="unknown reference generator"):
         load_reference_generator("mdm")
 

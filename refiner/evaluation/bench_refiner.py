@@ -47,8 +47,8 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, progress:
     import torch
     from sklearn.metrics import roc_auc_score
 
-    from refiner.refinement.pipeline import Refiner
     from refiner.refinement.anchor_recognition import match_anchors
+    from refiner.refinement.pipeline import Refiner
 
     progress = progress or ignore_progress
     test = load_bench_humanact12(data).split("test")

@@ -47,7 +47,7 @@ class ReferenceGenerator(NetworkComponent):
         self.action_names = list(self.action_names or HUMANACT12_ACTIONS)
         _check_schedule(self)
         rng = check_random_state(self.random_state)
-        device = resolve_device(self.device)
+        device = resolve_device(self._schedule().device)
         started = time.perf_counter()
         clips, labels, val_clips, val_labels = self._split(data, rng)
         self.action_names_ = list(self.action_names)
@@ -209,8 +209,8 @@ def _check_training_data(data, n_actions: int) -> tuple[list[np.ndarray], np.nda
 
 def _check_schedule(est) -> None:
     """ValueError for schedule values the training loop cannot use."""
-    for name in ("n_epochs", "batch_size", "n_frames"):
-        v = getattr(est, name)
+    schedule = est._schedule()
+    for name, v in (("n_epochs", schedule.n_epochs), ("batch_size", schedule.batch_size), ("n_frames", est.n_frames)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"`{name}` must be a positive int; got {v!r}.")
     if est.n_frames > N_FRAMES + 4:

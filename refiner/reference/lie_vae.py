@@ -19,7 +19,7 @@ from torch import nn
 from refiner.core.motion import Motion
 from refiner.core.validation import check_is_fitted
 from refiner.nn.components import NOT_FITTED
-from refiner.nn.training import ClipCrops
+from refiner.nn.training import ClipCrops, TrainSchedule
 from refiner.plugins.manager import PluginManager, get_plugin_manager
 from refiner.reference.base import (
     N_FRAMES,
@@ -184,10 +184,8 @@ class LieVAEGenerator(ReferenceGenerator):
     teacher_forcing : float, default=0.0
         0 trains exactly as it samples; 0.5 gave lower recogniser accuracy in a 200 s trial.
     n_frames : int, default=60
-    n_epochs, batch_size, learning_rate, patience, steps_per_epoch, max_seconds : training schedule
-    device : str, default="auto"
+    schedule : TrainSchedule, default=TrainSchedule(n_epochs=110, batch_size=128, learning_rate=1e-3, patience=30)
     random_state : int or None, default=0
-    verbose : bool, default=False
 
     Attributes
     ----------
@@ -212,25 +210,17 @@ class LieVAEGenerator(ReferenceGenerator):
     _desc = "a2m Lie VAE"
 
     def __init__(self, hidden: int = 128, *, latent_dim: int = 30, kl_weight: float = 1e-2, teacher_forcing: float = 0.0,
-                 n_frames: int = N_FRAMES, action_names: Sequence[str] | None = None, n_epochs: int = 110,
-                 batch_size: int = 128, learning_rate: float = 1e-3, patience: int = 30, steps_per_epoch: int | None = None,
-                 max_seconds: float | None = None, device: str = "auto", random_state: int | None = 0,
-                 verbose: bool = False):
+                 n_frames: int = N_FRAMES, action_names: Sequence[str] | None = None,
+                 schedule: TrainSchedule = TrainSchedule(n_epochs=110, batch_size=128, learning_rate=1e-3, patience=30),
+                 random_state: int | None = 0):
         self.hidden = hidden
         self.latent_dim = latent_dim
         self.kl_weight = kl_weight
         self.teacher_forcing = teacher_forcing
         self.n_frames = n_frames
         self.action_names = action_names
-        self.n_epochs = n_epochs
-        self.batch_size = batch_size
-        self.learning_rate = learning_rate
-        self.patience = patience
-        self.steps_per_epoch = steps_per_epoch
-        self.max_seconds = max_seconds
-        self.device = device
+        self.schedule = schedule
         self.random_state = random_state
-        self.verbose = verbose
 
     def _make_network(self, fitted: dict) -> LieVAE:
         return LieVAE(LieVAEConfig(len(fitted["action_names_"]), 72, self.hidden, self.latent_dim))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from dataclasses import replace
 from typing import Any
 
 from refiner.core.manifest import file_sha256, read_generator_manifest, write_manifest
@@ -93,10 +94,11 @@ def train_reference_generator(kind: str, dataset, out: str | os.PathLike, *, spl
     """
     cls = _kind(kind)
     data = dataset.split(split)
-    params: dict[str, Any] = {"max_seconds": max_seconds, "random_state": random_state, "device": device,
-                              "verbose": verbose}
+    schedule = replace(cls().schedule, max_seconds=max_seconds, device=device, progress=verbose)
     if quick:
-        params.update(n_epochs=2, steps_per_epoch=2, batch_size=16, patience=5)
+        schedule = replace(schedule, n_epochs=2, steps_per_epoch=2, batch_size=16, patience=5)
+    params: dict[str, Any] = {"schedule": schedule, "random_state": random_state}
+    if quick:
         params.update({"hidden": 16, "latent_dim": 4} if kind == "a2m" else
                       {"d_model": 16, "n_layers": 1, "n_heads": 2, "ffn_dim": 16})
     gen = cls(**params).fit(data)

@@ -17,7 +17,7 @@ from torch import nn
 from refiner.core.validation import check_is_fitted
 from refiner.nn.components import NOT_FITTED
 from refiner.nn.layers import sinusoidal_positions
-from refiner.nn.training import ClipCrops
+from refiner.nn.training import ClipCrops, TrainSchedule
 from refiner.reference.base import N_FRAMES, ReferenceGenerator, normal_noise
 
 __all__ = ["TransformerCVAE", "TransformerCVAEConfig", "TransformerCVAEGenerator"]
@@ -117,10 +117,8 @@ class TransformerCVAEGenerator(ReferenceGenerator):
         accuracy 29 % at 1e-3 against 42 % at 1e-2 in 150 s trials).
     velocity_weight : float, default=1.0
     n_frames : int, default=60
-    n_epochs, batch_size, learning_rate, patience, steps_per_epoch, max_seconds : training schedule
-    device : str, default="auto"
+    schedule : TrainSchedule, default=TrainSchedule(n_epochs=150, batch_size=64, learning_rate=1e-3, patience=40)
     random_state : int or None, default=0
-    verbose : bool, default=False
 
     Attributes
     ----------
@@ -138,10 +136,9 @@ class TransformerCVAEGenerator(ReferenceGenerator):
 
     def __init__(self, d_model: int = 64, *, n_layers: int = 2, n_heads: int = 4, ffn_dim: int = 128, dropout: float = 0.0,
                  kl_weight: float = 1e-2, velocity_weight: float = 1.0, n_frames: int = N_FRAMES,
-                 action_names: Sequence[str] | None = None, n_epochs: int = 150, batch_size: int = 64,
-                 learning_rate: float = 1e-3, patience: int = 40, steps_per_epoch: int | None = None,
-                 max_seconds: float | None = None, device: str = "auto", random_state: int | None = 0,
-                 verbose: bool = False):
+                 action_names: Sequence[str] | None = None,
+                 schedule: TrainSchedule = TrainSchedule(n_epochs=150, batch_size=64, learning_rate=1e-3, patience=40),
+                 random_state: int | None = 0):
         self.d_model = d_model
         self.n_layers = n_layers
         self.n_heads = n_heads
@@ -151,15 +148,8 @@ class TransformerCVAEGenerator(ReferenceGenerator):
         self.velocity_weight = velocity_weight
         self.n_frames = n_frames
         self.action_names = action_names
-        self.n_epochs = n_epochs
-        self.batch_size = batch_size
-        self.learning_rate = learning_rate
-        self.patience = patience
-        self.steps_per_epoch = steps_per_epoch
-        self.max_seconds = max_seconds
-        self.device = device
+        self.schedule = schedule
         self.random_state = random_state
-        self.verbose = verbose
 
     def _make_network(self, fitted: dict) -> TransformerCVAE:
         return TransformerCVAE(TransformerCVAEConfig(len(fitted["action_names_"]), 24, self.d_model, self.n_layers,

@@ -14,10 +14,10 @@ from refiner.concepts.segmentation import segment
 from refiner.concepts.transitions import TransitionGenerator
 from refiner.io.datasets import MotionDataset
 from refiner.nn.training import TrainSchedule
-from refiner.refinement.anchor_refinement import AnchorRefiner
-from refiner.refinement.pipeline import Refiner
 from refiner.refinement.anchor_quality import AnchorQuality
 from refiner.refinement.anchor_recognition import AnchorRecognizer
+from refiner.refinement.anchor_refinement import AnchorRefiner
+from refiner.refinement.pipeline import Refiner
 from refiner.refinement.transition_refinement import TransitionRefiner
 
 __all__ = ["CONFIGS", "train_refiner", "fit_anchor_quality", "held_out_clips"]
