@@ -226,3 +226,19 @@ def test_flaw_classifier_trains_on_crops_made_rigid_like_the_refiner_sees_them(h
     assert stretched.sum() >= 5
     assert np.median(dev_rigid[stretched]) < 0.2 * np.median(dev_raw[stretched])
     assert feats[0.005]["label"][..., 0].sum() <= feats[None]["label"][..., 0].sum()  # some flaw removed by rigidity
+
+
+@pytest.mark.real_data
+def test_learned_steps_alone_make_a_refiner_and_the_paper_method_says_what_is_missing(tiny_learned, humanact12, tmp_path):
+    refiner, _ = tiny_learned
+    alone = Refiner(None, None, None, None, None, None, refiner.flaw_recognizer, refiner.flaw_repairer,
+                    refiner.flaw_classifier, skeleton="humanact12", action_names=refiner.action_names,
+                    manifest={"dataset": "humanact12", "licence": "test"})
+    x = humanact12[10].joints
+    np.testing.assert_array_equal(alone.refine(x), refiner.refine(x))  # the learned method uses no paper part
+    alone.save(tmp_path / "alone")
+    assert sorted(p.stem for p in (tmp_path / "alone").glob("*.safetensors")) == [
+        "flaw_classifier", "flaw_recognizer", "flaw_repairer"]
+    np.testing.assert_array_equal(Refiner.load(tmp_path / "alone").refine(x), alone.refine(x))
+    with pytest.raises(ValueError, match="method='concepts'.*needs the parts recognizer.*learned steps only"):
+        Refiner.load(tmp_path / "alone", method="concepts")

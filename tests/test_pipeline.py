@@ -240,3 +240,18 @@ def test_thresholds_live_in_the_steps_and_travel_with_them(tiny_refiner, humanac
     assert back.anchor_quality.threshold_ == own - 5.0 and back.transition_retimer.thresholds_ == [[float("inf"), 0.01]]
     clip = humanact12[700]
     np.testing.assert_array_equal(back.refine(clip).joints, hand.refine(clip).joints)
+
+
+def test_shipped_weights_list_skeleton_split_and_licence():
+    shipped = {w["folder"]: w for w in Refiner.shipped()}
+    assert {"humanact12", "humanact12-train"} <= set(shipped)
+    for w in shipped.values():
+        assert w["licence"] and w["skeleton"] and w["split"] in ("all", "train") and w["parts"]
+    assert "non-commercial" in shipped["humanact12"]["licence"]
+    if "cmu_mocap-train" in shipped:  # CMU-only weights: a studio may use them
+        cmu = shipped["cmu_mocap-train"]
+        assert cmu["skeleton"] == "cmu_mocap" and "commercial products" in cmu["licence"]
+        model = Refiner.pretrained("cmu_mocap")  # split "all" falls back to the only CMU weights shipped
+        assert isinstance(model, Refiner) and model.manifest["dataset"] == "cmu_mocap"
+    with pytest.raises(ValueError, match="no shipped weights for skeleton 'humanact12', split 'test'; shipped: humanact12"):
+        Refiner.pretrained("humanact12", split="test")

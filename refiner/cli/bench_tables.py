@@ -232,13 +232,26 @@ def _skeletons(rec: dict) -> str:
     names = list(next(iter(rows_by.values()))["removed_pct"])
     rows = [[s, r["clean_mpjpe_change_cm"], r["clean_clips_changed"], *[r["removed_pct"][f] for f in names],
              r["mean_removed_pct"]] for s, r in rows_by.items()]
-    return "\n".join([
+    rows = [[s, r.get("weights", ""), *row[1:]] for (s, r), row in zip(rows_by.items(), rows)]
+    lines = [
         f"## Skeletons (HumanAct12 subjects 11-12, every {rec['stride']}th clip: {rec['clips']} clips, "
         "converted to each layout; severity 2; action unknown)", "",
-        "humanact12 has weights of its own; the others are refined through them (`ConvertedRefiner`).", "",
-        markdown_table(["skeleton", "clean: MPJPE change cm", "clean: share of clips changed",
-                        *[f"{f}: % removed" for f in names], "mean % removed"], rows), "",
-        f"{rec['seconds']:.0f} s wall."])
+        "`weights`: the dataset the skeleton's refiner was trained on (`humanact12, converted`: through the "
+        "HumanAct12 weights, `ConvertedRefiner`).", "",
+        markdown_table(["skeleton", "weights", "clean: MPJPE change cm", "clean: share of clips changed",
+                        *[f"{f}: % removed" for f in names], "mean % removed"], rows)]
+    for skel, r in rec.get("native", {}).items():
+        fams = list(r["removed_pct"])
+        acc = r["accuracy_pct"]
+        lines += ["", f"### {skel} on its own data ({r['dataset']} held-out subjects, {r['clips']} clips cut to their "
+                  "first frames; flaws seeded in its layout, severity 2; action unknown)", "",
+                  markdown_table(["clean: MPJPE change cm", "clean: share of clips changed",
+                                  *[f"{f}: % removed" for f in fams], "mean % removed"],
+                                 [[r["clean_mpjpe_change_cm"], r["clean_clips_changed"],
+                                   *[r["removed_pct"][f] for f in fams], r["mean_removed_pct"]]]), "",
+                  f"{r['dataset']} recogniser accuracy: clean {acc['clean']:.1f} %, flawed {acc['flawed']:.1f} %, "
+                  f"refined {acc['refined']:.1f} % (mean over families). Weights' licence: {r['licence']}"]
+    return "\n".join(lines + ["", f"{rec['seconds']:.0f} s wall."])
 
 
 #: Suite name -> the Markdown section of its record.

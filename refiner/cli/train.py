@@ -11,12 +11,13 @@ __all__ = ["train_arguments", "train_run"]
 
 
 def train_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dataset", default="humanact12", choices=["humanact12", "joints"],
+    p.add_argument("--dataset", default="humanact12", choices=["humanact12", "cmu_mocap", "joints"],
                    help="joints: your own clips in --data (a folder of .npy + labels.csv, or a .npz; see the README)")
     p.add_argument("--data", type=Path, default=None, help="dataset file or folder (default: ../shared/data/...)")
     p.add_argument("--skeleton", default=None, help="with --dataset joints: registered skeleton of the clips "
                                                     "(default: the file's, else the one with their joint count)")
-    p.add_argument("--split", default="all", choices=["all", "train"], help="all subjects, or 1-10 for benchmarks")
+    p.add_argument("--split", default="all", choices=["all", "train"],
+                   help="all subjects, or the benchmark training subjects (HumanAct12 1-10; CMU all but its 12 held out)")
     p.add_argument("--out", type=Path, required=True, help="folder for the trained refiner (rerun to resume)")
     p.add_argument("--config", default="default", choices=["default", "tiny"])
     p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu, cuda, ...")

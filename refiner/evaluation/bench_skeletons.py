@@ -8,8 +8,14 @@ converted, seed = clip index), refined with the action unknown (the other layout
 other labels), and scored against the converted clean clip: MPJPE change of clean clips and share
 of clips touched; share of each flaw's added MPJPE removed.
 
+A skeleton that ships weights of its own trained on another dataset (``cmu_mocap``: the CMU subset)
+also gets a *native* row: its dataset's held-out subjects (:data:`refiner.io.datasets.CMU_TEST_SUBJECTS`;
+every clip of at least :data:`NATIVE_FRAMES` frames, cut to its first :data:`NATIVE_FRAMES`), flaws
+seeded in its own layout, refined with the action unknown, and the dataset's Action2Motion recogniser's
+accuracy on the clean, flawed and refined clips (mean over families, 20 draws of its random hidden state).
+
 The record (``skeletons.json``): ``clips``, ``stride`` (every how many held-out clips were kept),
-``seconds`` and ``skeletons`` (:func:`skeleton_records`).
+``seconds``, ``skeletons`` (:func:`skeleton_records`) and ``native`` (:func:`native_records`).
 """
 from __future__ import annotations
 
@@ -23,10 +29,40 @@ from refiner.core.skeletons import convert
 from refiner.evaluation.bench_setup import Progress, load_bench_humanact12, one_thread, write_record
 from refiner.evaluation.flaws import FLAW_FAMILIES, corrupt
 
-__all__ = ["bench_skeletons", "skeleton_records", "SKELETONS"]
+__all__ = ["bench_skeletons", "skeleton_records", "native_records", "SKELETONS", "NATIVE", "NATIVE_FRAMES"]
 
-#: The skeletons a row is made for (HumanAct12 natively, the others through its weights).
+#: The skeletons a row is made for (HumanAct12 natively, the others through whatever weights serve them).
 SKELETONS = ("humanact12", "uestc", "cmu_mocap", "humanml3d")
+#: Skeletons with weights trained on a dataset of their own layout, and that dataset.
+NATIVE = {"cmu_mocap": "cmu_mocap"}
+#: Frames each native held-out clip is cut to (the CMU recogniser reads 100-frame crops).
+NATIVE_FRAMES = 120
+
+
+def _flawed(clips, families) -> dict:
+    """``{family: [joints (T, J, 3)]}``: every clip with each family seeded (severity 2, seed = clip index)."""
+    segs = [segment(m.joints) for m in clips]
+    donors = [[d for j, d in enumerate(clips) if j != i and d.action == m.action] for i, m in enumerate(clips)]
+    return {f: [corrupt(m, f, 2, random_state=i, segmentation=segs[i], donors=donors[i]).motion.joints
+                for i, m in enumerate(clips)] for f in families}
+
+
+def _row(model, clean, flawed: dict) -> tuple[dict, dict]:
+    """The clean clips' change and each family's share of added MPJPE removed; and the refined clips."""
+    def mpjpe(a, b):
+        return float(np.linalg.norm(a - b, axis=-1).mean())
+
+    moved = [mpjpe(model.refine(c), c) for c in clean]
+    row = {"clips": len(clean), "clean_mpjpe_change_cm": 100 * float(np.mean(moved)),
+           "clean_clips_changed": float(np.mean(np.array(moved) > 0)), "removed_pct": {}}
+    refined = {}
+    for family, given in flawed.items():
+        refined[family] = [model.refine(g) for g in given]
+        before = np.mean([mpjpe(g, c) for g, c in zip(given, clean)])
+        after = np.mean([mpjpe(r, c) for r, c in zip(refined[family], clean)])
+        row["removed_pct"][family] = 100 * float(1 - after / before) if before > 0 else 0.0
+    row["mean_removed_pct"] = float(np.mean(list(row["removed_pct"].values())))
+    return row, refined
 
 
 def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = "train") -> dict:
@@ -34,11 +70,7 @@ def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = 
     family and ``mean_removed_pct``, for ``clips`` (Motions on the 24 HumanAct12 joints)."""
     from refiner.refinement.pipeline import Refiner  # imports torch: here, so that importing the suites stays cheap
 
-    families = list(families or FLAW_FAMILIES)
-    segs = [segment(m.joints) for m in clips]
-    donors = [[d for j, d in enumerate(clips) if j != i and d.action == m.action] for i, m in enumerate(clips)]
-    flawed = {f: [corrupt(m, f, 2, random_state=i, segmentation=segs[i], donors=donors[i]).motion.joints
-                  for i, m in enumerate(clips)] for f in families}
+    flawed = _flawed(clips, list(families or FLAW_FAMILIES))
     rec = {}
     for name in skeletons:
         model = Refiner.pretrained(name, split=split)
@@ -46,16 +78,43 @@ def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = 
         def to(x):
             return np.asarray(x if name == "humanact12" else convert(x, "humanact12", name), np.float32)
 
-        clean = [to(m.joints) for m in clips]
-        moved = [float(np.linalg.norm(model.refine(c) - c, axis=-1).mean()) for c in clean]
-        row = {"clips": len(clips), "clean_mpjpe_change_cm": 100 * float(np.mean(moved)),
-               "clean_clips_changed": float(np.mean(np.array(moved) > 0)), "removed_pct": {}}
-        for family in families:
-            given = [to(x) for x in flawed[family]]
-            before = np.mean([np.linalg.norm(g - c, axis=-1).mean() for g, c in zip(given, clean)])
-            after = np.mean([np.linalg.norm(model.refine(g) - c, axis=-1).mean() for g, c in zip(given, clean)])
-            row["removed_pct"][family] = 100 * float(1 - after / before) if before > 0 else 0.0
-        row["mean_removed_pct"] = float(np.mean(list(row["removed_pct"].values())))
+        rec[name] = _row(model, [to(m.joints) for m in clips], {f: [to(x) for x in v] for f, v in flawed.items()})[0]
+        rec[name]["weights"] = model.manifest.get("dataset") if isinstance(model, Refiner) else "humanact12, converted"
+    return rec
+
+
+def native_records(data: Path | None, *, families=None, stride: int = 1, split: str = "train",
+                   n_replications: int = 20) -> dict:
+    """Per skeleton of :data:`NATIVE` with shipped weights: the row of :func:`skeleton_records` on its
+    own dataset's held-out clips, plus ``accuracy_pct`` of its recogniser on ``clean``, ``flawed`` and
+    ``refined`` clips (flawed / refined: mean over families) and the weights' ``licence``."""
+    from refiner.evaluation.evaluators import load_recognizer  # imports torch: see skeleton_records
+    from refiner.io.datasets import load_cmu_mocap
+    from refiner.refinement.pipeline import Refiner, shipped_weights
+
+    shipped = {(w["skeleton"], w["split"]) for w in shipped_weights()}
+    rec = {}
+    for name, dataset in NATIVE.items():
+        if (name, split) not in shipped:
+            continue
+        test = load_cmu_mocap(None if data is None else Path(data) / "cmu_mocap" / "cmu_mocap_labeled_joints.npz")
+        clips = [m.with_joints(m.joints[:NATIVE_FRAMES]) for m in test.split("test") if len(m.joints) >= NATIVE_FRAMES]
+        clips = clips[::stride]
+        model = Refiner.pretrained(name, split=split)
+        flawed = _flawed(clips, list(families or FLAW_FAMILIES))
+        row, refined = _row(model, [m.joints for m in clips], flawed)
+        recognizer = load_recognizer(dataset, directory=None if data is None else Path(data).parent / "evaluators")
+        labels = np.array([m.action for m in clips])
+
+        def accuracy(joints) -> float:
+            motions = [m.with_joints(j) for m, j in zip(clips, joints)]
+            return 100 * float(np.mean([np.mean(recognizer.predict(motions, random_state=r) == labels)
+                                        for r in range(n_replications)]))
+
+        row["accuracy_pct"] = {"clean": accuracy([m.joints for m in clips]),
+                               "flawed": float(np.mean([accuracy(v) for v in flawed.values()])),
+                               "refined": float(np.mean([accuracy(v) for v in refined.values()]))}
+        row["dataset"], row["licence"] = dataset, model.manifest.get("licence")
         rec[name] = row
     return rec
 
@@ -75,5 +134,7 @@ def bench_skeletons(data: Path | None, out: Path | None, quick: bool, *, stride:
     families = ("frozen_transition", "foot_sliding") if quick else None
     t0 = time.perf_counter()
     rec = skeleton_records(clips, skeletons, families=families)
+    native = native_records(data, families=families, stride=40 if quick else 2, n_replications=2 if quick else 20)
     seconds = time.perf_counter() - t0
-    return write_record(out, "skeletons", {"clips": len(clips), "stride": stride, "seconds": seconds, "skeletons": rec})
+    return write_record(out, "skeletons", {"clips": len(clips), "stride": stride, "seconds": seconds, "skeletons": rec,
+                                           "native": native})

@@ -9,6 +9,7 @@ without jumps and put back on the input's bone lengths (:mod:`refiner.refinement
 from __future__ import annotations
 
 import copy
+import json
 import os
 from pathlib import Path
 
@@ -120,6 +121,12 @@ class Refiner:
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
         if self.method == "learned" and not learned:
             raise ValueError("method='learned' needs a `flaw_recognizer` and a `flaw_repairer`.")
+        paper = {"recognizer": recognizer, "anchor_refiner": anchor_refiner, "transition_generator": transition_generator,
+                 "transition_refiner": transition_refiner, "anchor_concepts": anchor_concepts, "anchor_quality": anchor_quality}
+        missing = [name for name, part in paper.items() if part is None]
+        if self.method == "concepts" and missing:
+            raise ValueError(f"method='concepts' (the paper's) needs the parts {', '.join(missing)}, which these "
+                             "weights lack (they hold the learned steps only); use method='learned'.")
         self.repair = check_choice("repair", repair, learned_pipeline.REPAIRS)
         self.detect = learned_pipeline.check_detect(detect)
         for option, needs in (("detect", "classifier" in self.detect.split("+")), ("repair", repair in ("select", "typed"))):
@@ -130,7 +137,7 @@ class Refiner:
         self.quality = check_choice("quality", quality, concepts_pipeline.QUALITY)
         self.anchor_method = check_choice("anchor_method", anchor_method, concepts_pipeline.ANCHOR_METHODS)
         self.transition_method = check_choice("transition_method", transition_method, concepts_pipeline.TRANSITION_METHODS)
-        if anchor_quality is None and (quality == "pose" or anchor_method == "posterior"):
+        if self.method == "concepts" and anchor_quality is None and (quality == "pose" or anchor_method == "posterior"):
             raise ValueError("quality='pose' and anchor_method='posterior' need an `anchor_quality` model.")
         self.anchor_noise, self.blend, self.threads = anchor_noise, blend, check_threads(threads)
         self.skeleton = get_skeleton(skeleton).name
@@ -197,6 +204,11 @@ class Refiner:
         """
         with thread_limits(1):  # copying the tensors on one thread: 0.07 s; on two, under load, 0.4-0.6 s
             return copy.deepcopy(_shared_pretrained(cls, skeleton, split, device, kwargs))
+
+    @staticmethod
+    def shipped() -> list[dict]:
+        """The shipped weight sets with their skeleton, split, dataset and licence (:func:`shipped_weights`)."""
+        return shipped_weights()
 
     def n_parameters(self) -> dict:
         """Network parameters per part, and their ``total``."""
@@ -295,18 +307,35 @@ def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict
     """The shipped refiner for these arguments, loaded once and cached (see :meth:`Refiner.pretrained`)."""
     name = f"{get_skeleton(skeleton).name}" + ("" if split == "all" else f"-{split}")
     folder = _WEIGHTS / name
+    if not (folder / "manifest.json").is_file() and split == "all" and (_WEIGHTS / f"{name}-train" / "manifest.json").is_file():
+        return _shared_pretrained(cls, skeleton, "train", device, kwargs)  # a skeleton that ships train-split weights only
     if not (folder / "manifest.json").is_file() and _converts(skeleton):
         kwargs = dict(kwargs)
         tolerance = kwargs.pop("rigid_tolerance", 0.005)  # on the clip's own bones, not the estimated ones
         base = _shared_pretrained(cls, "humanact12", split, device, {**kwargs, "rigid_tolerance": float("inf")})
         return ConvertedRefiner(base, skeleton, rigid_tolerance=tolerance)
     if not (folder / "manifest.json").is_file():
-        known = sorted(p.name for p in _WEIGHTS.iterdir() if (p / "manifest.json").is_file()) if _WEIGHTS.is_dir() else []
-        raise ValueError(f"no shipped weights for skeleton {skeleton!r}, split {split!r}; shipped: {known or 'none'}.")
+        known = [f"{w['folder']} ({w['skeleton']}, {w['split']})" for w in shipped_weights()]
+        raise ValueError(f"no shipped weights for skeleton {skeleton!r}, split {split!r}; shipped: "
+                         f"{', '.join(known) or 'none'} (licences: refiner.refinement.pipeline.shipped_weights()).")
     key = (name, device, tuple(sorted(kwargs.items())))
     if key not in _PRETRAINED:
         _PRETRAINED[key] = cls.load(folder, device=device, **kwargs)
     return _PRETRAINED[key]
+
+
+def shipped_weights() -> list[dict]:
+    """The refiner weight sets in the package: ``folder``, ``skeleton``, ``split``, ``dataset``, ``licence``
+    and ``parts`` of each, from its manifest (the same as :meth:`Refiner.shipped`)."""
+    out = []
+    for folder in sorted(p for p in _WEIGHTS.iterdir() if (p / "manifest.json").is_file()) if _WEIGHTS.is_dir() else []:
+        manifest = json.loads((folder / "manifest.json").read_text())
+        if "action_names" not in manifest:  # evaluator and generator weights have manifests of another kind
+            continue
+        out.append({"folder": folder.name, "skeleton": manifest["skeleton"], "split": manifest.get("split", "all"),
+                    "dataset": manifest.get("dataset"), "licence": manifest.get("licence"),
+                    "parts": sorted(manifest.get("files", {}))})
+    return out
 
 
 def _converts(skeleton: str) -> bool:

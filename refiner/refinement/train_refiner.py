@@ -47,6 +47,12 @@ LICENCE = ("Trained on HumanAct12 (derived from PHSPD): academic, non-commercial
 
 USER_DATA_LICENCE = "Trained on user-supplied joint clips: the licence of those data applies to these weights."
 
+CMU_LICENCE = ("Trained only on the CMU Graphics Lab Motion Capture Database (Action2Motion's labelled subset, "
+               "mocap.cs.cmu.edu): free for all uses, including commercial products; the data may not be resold.")
+
+#: Licence of weights trained on each dataset (any other: :data:`USER_DATA_LICENCE`).
+LICENCES = {"humanact12": LICENCE, "cmu_mocap": CMU_LICENCE}
+
 
 def train_refiner(
     dataset: MotionDataset,
@@ -118,7 +124,7 @@ def train_refiner(
     manifest = {
         "dataset": dataset.name, "split": split, "config": config, "clips": len(clips),
         "subjects": sorted(set(int(s) for s in data.subjects)), "penalty": concepts.config["penalty"],
-        "licence": LICENCE if dataset.name == "humanact12" else USER_DATA_LICENCE, "commit": _commit(), "train_seconds": seconds,
+        "licence": LICENCES.get(dataset.name, USER_DATA_LICENCE), "commit": _commit(), "train_seconds": seconds,
         "total_seconds": round(time.perf_counter() - t0, 1),
     }
     refiner = Refiner(recognizer, anchor_refiner, generator, transition_refiner, anchor_concepts, anchor_quality,
