@@ -196,11 +196,12 @@ class Refiner:
         """The shipped weights: ``split="all"`` (default, all subjects) or ``"train"`` (subjects 1-10, for benchmarks).
 
         Weights are loaded and verified against their manifest on first use; every call returns an
-        independent copy, so changing one (:meth:`calibrate`, a threshold) changes no other. They were
-        trained on HumanAct12, which is for academic, non-commercial use only; so are they. A skeleton
-        without weights of its own that :func:`refiner.core.skeletons.convert` connects with HumanAct12's
-        (``uestc``, ``humanml3d``, ``cmu_mocap``) gets a
-        :class:`~refiner.refinement.converted_refinement.ConvertedRefiner` running the HumanAct12 weights.
+        independent copy, so changing one (:meth:`calibrate`, a threshold) changes no other. Each weight
+        set's licence is in its manifest (:meth:`shipped` lists them): HumanAct12's are for academic,
+        non-commercial use only; ``cmu_mocap``'s (the learned steps, trained on the CMU subset alone; train
+        split only, which ``split="all"`` falls back to) for all uses. A skeleton without weights of its own
+        that :func:`refiner.core.skeletons.convert` connects with HumanAct12's (``uestc``, ``humanml3d``)
+        gets a :class:`~refiner.refinement.converted_refinement.ConvertedRefiner` running the HumanAct12 weights.
         """
         with thread_limits(1):  # copying the tensors on one thread: 0.07 s; on two, under load, 0.4-0.6 s
             return copy.deepcopy(_shared_pretrained(cls, skeleton, split, device, kwargs))
@@ -269,8 +270,9 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
     seq : Motion, or array-like of shape (T, J, 3) or (B, T, J, 3) (numpy or torch)
         Joint positions in metres in the skeleton's canonical frame (HumanAct12: y down, facing -z).
     skeleton : str, default="humanact12"
-        ``"humanact12"`` has shipped weights; ``"uestc"``, ``"cmu_mocap"`` and ``"humanml3d"`` are
-        refined through them (:class:`~refiner.refinement.converted_refinement.ConvertedRefiner`).
+        ``"humanact12"`` and ``"cmu_mocap"`` have shipped weights (:meth:`Refiner.shipped`; CMU's, trained on
+        the CMU subset alone, may be used commercially); ``"uestc"`` and ``"humanml3d"`` are refined through
+        HumanAct12's (:class:`~refiner.refinement.converted_refinement.ConvertedRefiner`).
     action : int, str or None
         Action index or name (per clip for a batch); inferred by anchor recognition when None.
     mode : {"full", "anchor", "transition"}, default="full"
