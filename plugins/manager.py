@@ -90,7 +90,13 @@ class PluginManager(pluggy.PluginManager):
         return infos[name]
 
     def recognize(self, generator: Any) -> str | None:
-        """Adapter name from the first plugin that recognises *generator*, or None.
+        """Deprecated name of :meth:`adapter_for` (one meaning per name: *recognition* is the paper's anchor step)."""
+        warnings.warn("PluginManager.recognize is now PluginManager.adapter_for; the old name goes in 0.3.",
+                      DeprecationWarning, stacklevel=2)
+        return self.adapter_for(generator)
+
+    def adapter_for(self, generator: Any) -> str | None:
+        """The name of the adapter whose plugin claims *generator* (hook ``refiner_recognize_generator``), or None.
 
         Each plugin is asked in hook-call order; one that raises or names an unknown adapter
         is reported with a warning and skipped.

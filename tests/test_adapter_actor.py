@@ -281,8 +281,8 @@ def test_actor_model_is_recognised_and_sampled(smpl_dir, pm):
     from refiner import RefinedGenerator
 
     model = FakeActorModel()
-    assert pm.recognize(model) == "actor"
-    assert pm.recognize(object()) is None
+    assert pm.adapter_for(model) == "actor"
+    assert pm.adapter_for(object()) is None
     shift = np.array([0.0, 0.0, 0.5], dtype=np.float32)
     gen = RefinedGenerator(model, refiner=lambda m: m.with_joints(m.joints + shift),
                            adapter_options={"smpl_path": smpl_dir}, plugin_manager=pm)

@@ -202,7 +202,7 @@ def test_broken_plugins_warn_and_others_keep_working(example_installed, tmp_path
         import toymotion_adapter
 
         with pytest.warns(AdapterPluginWarning, match="bad_mr_bad_recognizer.*cannot look at this"):
-            assert pm.recognize(toymotion_adapter.ToyMotionGenerator()) == "toymotion"
+            assert pm.adapter_for(toymotion_adapter.ToyMotionGenerator()) == "toymotion"
         motions = pm.convert("toymotion", toymotion_adapter.ToyMotionGenerator().sample(0, n=1))
         assert motions[0].joints.shape == (60, 24, 3)
     finally:
@@ -389,3 +389,8 @@ def test_old_import_paths_warn_and_give_the_same_objects():
         assert refiner.adapters.BUILTIN_ADAPTERS == refiner.plugins.BUILTIN_ADAPTERS
     with pytest.raises(AttributeError):
         refiner.adapters.base.no_such_name
+
+
+def test_recognize_is_the_deprecated_name_of_adapter_for(pm):
+    with pytest.warns(DeprecationWarning, match="adapter_for"):
+        assert pm.recognize(object()) is None

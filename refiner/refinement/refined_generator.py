@@ -91,7 +91,7 @@ class RefinedGenerator:
         self.adapter_options = dict(adapter_options or {})
         self._pm = plugin_manager if plugin_manager is not None else get_plugin_manager()
         if adapter is None:
-            adapter = self._pm.recognize(generator)
+            adapter = self._pm.adapter_for(generator)
             if adapter is None:
                 raise ValueError(
                     f"no adapter recognises generator of type {type(generator).__name__}; pass adapter=..., "
