@@ -22,7 +22,8 @@ from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.training import ClipCrops, fit_network, resolve_device, seeded
 from refiner.plugins.manager import PluginManager, get_plugin_manager
 
-__all__ = ["N_FRAMES", "ReferenceGenerator", "median_bone_pose", "normal_noise", "pad_with_last_frame", "training_crops"]
+__all__ = ["N_FRAMES", "ReferenceGenerator", "JointsGenerator", "median_bone_pose", "normal_noise", "pad_with_last_frame",
+           "training_crops"]
 
 #: Crop length of the shipped generators (frames at 20 fps).
 N_FRAMES = 60
@@ -141,6 +142,34 @@ class ReferenceGenerator(NetworkComponent):
         val, train = order[:n_val], order[n_val:] if n_val else order
         return [clips[i] for i in train], labels[train], [clips[i] for i in val], labels[val]
 
+
+
+class JointsGenerator(ReferenceGenerator):
+    """A reference generator of normalised joint positions (per-joint mean and std of the training crops,
+    ``mean_`` and ``std_`` (24, 3) metres), converted by the ``action2motion`` adapter's xyz path."""
+
+    _fitted_arrays = ("mean_", "std_")
+
+    def _fit_statistics(self, clips: Sequence[np.ndarray]) -> None:
+        stats = ClipCrops(clips, self.n_frames).sample(range(len(clips)), np.random.default_rng(0))["joints"]
+        self.mean_ = stats.mean((0, 1)).astype(np.float32)
+        self.std_ = np.maximum(stats.std((0, 1)), 1e-3).astype(np.float32)
+
+    def _crops(self, clips: Sequence[np.ndarray]) -> ClipCrops:
+        return ClipCrops(clips, self.n_frames)  # re-centred: the crop's first root at the origin
+
+    def _normalised(self, crops: dict, device) -> torch.Tensor:
+        """``(B, T, 24, 3)`` normalised joints of :meth:`ClipCrops.sample`'s output."""
+        mean, std = torch.from_numpy(self.mean_).to(device), torch.from_numpy(self.std_).to(device)
+        return (torch.from_numpy(crops["joints"]).to(device) - mean) / std
+
+    def _metres(self, x: np.ndarray) -> np.ndarray:
+        """Normalised ``(..., 24, 3)`` back to metres, float32."""
+        return (x * self.std_ + self.mean_).astype(np.float32)
+
+    def adapter_options(self) -> dict:
+        check_is_fitted(self, "network_", msg=NOT_FITTED)
+        return {"representation": "xyz", "recenter": True}
 
 def pad_with_last_frame(crops: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Fill the frames after each crop's last valid one with that frame, in place (the A2M convention).

@@ -14,11 +14,9 @@ import torch
 from einops import rearrange
 from torch import nn
 
-from refiner.core.validation import check_is_fitted
-from refiner.nn.components import NOT_FITTED
 from refiner.nn.layers import sinusoidal_positions
-from refiner.nn.training import ClipCrops, TrainSchedule
-from refiner.reference.base import N_FRAMES, ReferenceGenerator, normal_noise
+from refiner.nn.training import TrainSchedule
+from refiner.reference.base import N_FRAMES, JointsGenerator, normal_noise
 
 __all__ = ["TransformerCVAE", "TransformerCVAEConfig", "TransformerCVAEGenerator"]
 
@@ -96,7 +94,7 @@ class TransformerCVAE(nn.Module):
         return self.decode(z, actions, x.shape[1]), mu, logvar
 
 
-class TransformerCVAEGenerator(ReferenceGenerator):
+class TransformerCVAEGenerator(JointsGenerator):
     """ACTOR-style transformer CVAE emitting joint positions ``(N, 60, 24, 3)``.
 
     Joints are standardised per coordinate with the training crops' mean and standard deviation.
@@ -131,7 +129,6 @@ class TransformerCVAEGenerator(ReferenceGenerator):
     """
 
     _fitted_attributes = ("action_names_", "history_", "train_seconds_")
-    _fitted_arrays = ("mean_", "std_")
     _desc = "actor transformer CVAE"
 
     def __init__(self, d_model: int = 64, *, n_layers: int = 2, n_heads: int = 4, ffn_dim: int = 128, dropout: float = 0.0,
@@ -155,17 +152,8 @@ class TransformerCVAEGenerator(ReferenceGenerator):
         return TransformerCVAE(TransformerCVAEConfig(len(fitted["action_names_"]), 24, self.d_model, self.n_layers,
                                                      self.n_heads, self.ffn_dim, self.dropout, max(self.n_frames, 2)))
 
-    def _fit_statistics(self, clips: Sequence[np.ndarray]) -> None:
-        stats = ClipCrops(clips, self.n_frames).sample(range(len(clips)), np.random.default_rng(0))["joints"]
-        self.mean_ = stats.mean((0, 1)).astype(np.float32)
-        self.std_ = np.maximum(stats.std((0, 1)), 1e-3).astype(np.float32)
-
-    def _crops(self, clips: Sequence[np.ndarray]) -> ClipCrops:
-        return ClipCrops(clips, self.n_frames)  # re-centred: the crop's first root at the origin
-
     def _batch(self, crops: dict, actions: torch.Tensor, device) -> dict:
-        mean, std = torch.from_numpy(self.mean_).to(device), torch.from_numpy(self.std_).to(device)
-        return {"x": (torch.from_numpy(crops["joints"]).to(device) - mean) / std, "actions": actions}
+        return {"x": self._normalised(crops, device), "actions": actions}
 
     def _loss(self, net: TransformerCVAE, batch: dict, rng) -> torch.Tensor:
         x, actions = batch["x"], batch["actions"]
@@ -179,8 +167,4 @@ class TransformerCVAEGenerator(ReferenceGenerator):
         HumanAct12's y-down frame, first-frame root near the origin."""
         z = normal_noise(rng, (len(actions), net.config.d_model), actions)
         x = net.decode(z, actions, self.n_frames).cpu().numpy()
-        return (x * self.std_ + self.mean_).astype(np.float32)
-
-    def adapter_options(self) -> dict:
-        check_is_fitted(self, "network_", msg=NOT_FITTED)
-        return {"representation": "xyz", "recenter": True}
+        return self._metres(x)
