@@ -103,7 +103,7 @@ def test_demo_rejects_unknown_generator_and_action(tmp_path):
     with pytest.raises(ValueError, match="unknown action 'fly'"):
         run_demo(tmp_path, actions=["fly"])
     with pytest.raises(ValueError, match="unknown reference generator"):
-        run_demo(tmp_path, generator="mdm")
+        run_demo(tmp_path, generator="no_such_kind")
 
 
 def test_summary_row_says_total_for_counts_and_mean_for_confidence():

@@ -40,7 +40,7 @@ def test_shipped_refiner_manifests_carry_their_content_hash(folder):
 
 def test_shipped_generator_manifest_carries_its_content_hash():
     manifest, paths = read_generator_manifest(WEIGHTS_DIR)
-    assert manifest[CONTENT_KEY] == content_sha256(manifest) and set(paths) == {"a2m", "actor"}
+    assert manifest[CONTENT_KEY] == content_sha256(manifest) and set(paths) == {"a2m", "actor", "mdm"}
 
 
 @pytest.mark.parametrize("change", [

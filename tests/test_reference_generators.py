@@ -102,7 +102,7 @@ def test_unfitted_and_bad_arguments(tiny_clip):
         with pytest.raises(ValueError, match="n_epochs"):
             cls(schedule=TrainSchedule(n_epochs=0)).fit([Motion(tiny_clip, action=1)])
     with pytest.raises(ValueError, match="unknown reference generator"):
-        load_reference_generator("mdm")
+        load_reference_generator("no_such_kind")
 
 
 @pytest.mark.real_data

@@ -32,7 +32,7 @@ __all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "form
 
 def demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder (created)")
-    p.add_argument("--generator", default="a2m", choices=["a2m", "actor"],
+    p.add_argument("--generator", default="a2m", choices=["a2m", "actor", "mdm"],
                    help="reference generator: a2m (Lie GRU VAE, default) or actor (transformer CVAE)")
     p.add_argument("--actions", default=None,
                    help="comma-separated action names or indices (default: all 12; --quick: walk, boxing)")
@@ -130,7 +130,7 @@ def run_demo(
     ----------
     out : path
         Output folder (created).
-    generator : {"a2m", "actor"}, default="a2m"
+    generator : {"a2m", "actor", "mdm"}, default="a2m"
         Which shipped reference generator to sample.
     actions : sequence of int or str, optional
         HumanAct12 actions; default all 12 (two with ``quick``).

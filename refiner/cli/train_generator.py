@@ -12,8 +12,8 @@ __all__ = ["train_generator_arguments", "train_generator_run"]
 
 
 def train_generator_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--kind", required=True, choices=["a2m", "actor"],
-                   help="a2m: Action2Motion-style Lie GRU VAE; actor: ACTOR-style transformer CVAE")
+    p.add_argument("--kind", required=True, choices=["a2m", "actor", "mdm"],
+                   help="a2m: Action2Motion-style Lie GRU VAE; actor: ACTOR-style transformer CVAE; mdm: MDM-style diffusion")
     p.add_argument("--out", type=Path, required=True,
                    help="folder for <kind>.safetensors and manifest.json (refiner/weights/generators ships them)")
     p.add_argument("--data", type=Path, default=None, help="HumanAct12 file or folder (default: ../shared/data/...)")

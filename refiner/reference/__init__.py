@@ -1,4 +1,4 @@
-"""Two small reference generators trained on HumanAct12, so the refiner can be measured on real generator output.
+"""Three reference generators trained on HumanAct12, so the refiner can be measured on real generator output.
 
 - :class:`LieVAEGenerator` (``"a2m"``, :mod:`refiner.reference.lie_vae`) follows Action2Motion
   (Guo et al. 2020): a conditional GRU VAE with a learned prior that emits, frame by frame, the root
@@ -8,8 +8,13 @@
   ACTOR (Petrovich et al. 2021): a transformer CVAE with per-action distribution tokens in the
   encoder and time queries in the decoder. It emits joint positions directly (converted by the
   ``action2motion`` adapter's ``representation="xyz"`` path, i.e. passed through and re-centred).
+- :class:`MotionDiffusionGenerator` (``"mdm"``, :mod:`refiner.reference.diffusion`) follows MDM
+  (Tevet et al. 2023): a transformer denoiser predicting the clean clip, classifier-free guidance,
+  50 DDIM steps; joint positions like ``actor``. Trained 35 minutes on two CPU threads (stopped by
+  its time limit at epoch 676 of 3,000): recogniser accuracy 75.8 % of its samples, FID 2.03
+  (600 samples, 5 replications).
 
-Both (:mod:`refiner.reference.base`) are trained on 60-frame crops (first-frame root at the origin,
+The first two (:mod:`refiner.reference.base`) are trained on 60-frame crops (first-frame root at the origin,
 native y-down frame) of HumanAct12 subjects 1-10 for a fixed number of epochs with early stopping
 (about 8 minutes each on one CPU thread; an optional time limit), and reach the adapter only through
 the plugin contract. They are honest small models, and their flaws are whatever such training
@@ -23,7 +28,8 @@ and so are they.
 from __future__ import annotations
 
 from refiner.core.rotations import unwrap_rotvecs
-from refiner.reference.base import ReferenceGenerator, training_crops
+from refiner.reference.base import JointsGenerator, ReferenceGenerator, training_crops
+from refiner.reference.diffusion import MotionDenoiser, MotionDenoiserConfig, MotionDiffusionGenerator
 from refiner.reference.lie_vae import LieVAE, LieVAEConfig, LieVAEGenerator, lie_targets
 from refiner.reference.loading import (
     GENERATOR_KINDS,
@@ -36,6 +42,10 @@ from refiner.reference.transformer_cvae import TransformerCVAE, TransformerCVAEC
 
 __all__ = [
     "GENERATOR_KINDS",
+    "JointsGenerator",
+    "MotionDenoiser",
+    "MotionDenoiserConfig",
+    "MotionDiffusionGenerator",
     "LICENCE",
     "LieVAE",
     "LieVAEConfig",

@@ -94,7 +94,9 @@ class MotionDiffusionGenerator(JointsGenerator):
     velocity_weight : float, default=1.0
     n_frames : int, default=60
     action_names : sequence of str, optional
-    schedule : TrainSchedule
+    schedule : TrainSchedule, default=TrainSchedule(n_epochs=3000, batch_size=64, learning_rate=2e-4, patience=3000)
+        No early stopping (the validation loss of random timesteps is noisy); the shipped weights stopped
+        at the 2,100 s time limit (``--max-seconds``), epoch 676.
     random_state : int or None, default=0
 
     Attributes
@@ -113,7 +115,7 @@ class MotionDiffusionGenerator(JointsGenerator):
     def __init__(self, d_model: int = 128, *, n_layers: int = 4, n_heads: int = 4, ffn_dim: int = 256,
                  diffusion_steps: int = 100, sampling_steps: int = 50, guidance: float = 2.5, cond_dropout: float = 0.1,
                  velocity_weight: float = 1.0, n_frames: int = N_FRAMES, action_names: Sequence[str] | None = None,
-                 schedule: TrainSchedule = TrainSchedule(n_epochs=400, batch_size=64, learning_rate=2e-4, patience=400),
+                 schedule: TrainSchedule = TrainSchedule(n_epochs=3000, batch_size=64, learning_rate=2e-4, patience=3000),
                  random_state: int | None = 0):
         self.d_model = d_model
         self.n_layers = n_layers

@@ -14,6 +14,7 @@ from typing import Any
 
 from refiner.core.manifest import file_sha256, read_generator_manifest, write_manifest
 from refiner.reference.base import ReferenceGenerator
+from refiner.reference.diffusion import MotionDiffusionGenerator
 from refiner.reference.lie_vae import LieVAEGenerator
 from refiner.reference.transformer_cvae import TransformerCVAEGenerator
 
@@ -25,7 +26,8 @@ LICENCE = ("Trained on HumanAct12 (derived from PHSPD) subjects 1-10: academic, 
            "Cite Action2Motion (Guo et al. 2020) and PHSPD (Zou et al. 2020).")
 
 #: Reference generator classes by the short name used by the CLI and the shipped weights.
-GENERATOR_KINDS: dict[str, type[ReferenceGenerator]] = {"a2m": LieVAEGenerator, "actor": TransformerCVAEGenerator}
+GENERATOR_KINDS: dict[str, type[ReferenceGenerator]] = {"a2m": LieVAEGenerator, "actor": TransformerCVAEGenerator,
+                                                      "mdm": MotionDiffusionGenerator}
 
 
 def load_reference_generator(kind: str = "a2m", *, folder: str | os.PathLike | None = None, device: str = "cpu",
@@ -34,7 +36,7 @@ def load_reference_generator(kind: str = "a2m", *, folder: str | os.PathLike | N
 
     Parameters
     ----------
-    kind : {"a2m", "actor"}, default="a2m"
+    kind : {"a2m", "actor", "mdm"}, default="a2m"
     folder : path, optional
         A folder written by :func:`train_reference_generator` (``<kind>.safetensors`` plus
         ``manifest.json``); default the shipped weights, :data:`WEIGHTS_DIR`.
@@ -68,7 +70,7 @@ def train_reference_generator(kind: str, dataset, out: str | os.PathLike, *, spl
 
     Parameters
     ----------
-    kind : {"a2m", "actor"}
+    kind : {"a2m", "actor", "mdm"}
     dataset : MotionDataset
         HumanAct12 (with subject ids when ``split`` is not ``"all"``).
     out : path
@@ -101,6 +103,8 @@ def train_reference_generator(kind: str, dataset, out: str | os.PathLike, *, spl
     if quick:
         params.update({"hidden": 16, "latent_dim": 4} if kind == "a2m" else
                       {"d_model": 16, "n_layers": 1, "n_heads": 2, "ffn_dim": 16})
+        if kind == "mdm":
+            params.update(diffusion_steps=20, sampling_steps=5)
     gen = cls(**params).fit(data)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
