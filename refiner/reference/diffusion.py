@@ -10,7 +10,8 @@ noise from the seeded numpy stream). The loss is MSE on ``x_0`` plus ``velocity_
 its frame-to-frame differences (MDM's velocity term). Its output, joint positions, is converted by the
 ``action2motion`` adapter's ``representation="xyz"`` path, like the transformer CVAE's.
 
-Not yet shipped: no weights trained to the target of the issue (recogniser accuracy >= 85 %).
+Shipped as ``mdm`` after 35 minutes on two CPU threads (recogniser accuracy of its samples 75.8 %,
+FID 2.03 on 600 samples): longer training (a GPU) is what it needs next.
 """
 from __future__ import annotations
 
