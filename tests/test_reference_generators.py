@@ -227,3 +227,34 @@ def test_tiny_diffusion_generator_trains_samples_deterministically_and_round_tri
     with pytest.raises(ValueError, match="sampling_steps"):
         MotionDiffusionGenerator(16, n_layers=1, n_heads=2, ffn_dim=16, diffusion_steps=10, sampling_steps=20,
                                  schedule=TrainSchedule(n_epochs=1, steps_per_epoch=1, batch_size=8)).fit(small_set)
+
+
+@pytest.mark.real_data
+def test_training_goes_on_from_a_saved_generator_and_resumes_from_a_checkpoint(small_set, tmp_path):
+    from dataclasses import replace
+
+    from refiner.reference.diffusion import MotionDiffusionGenerator
+
+    schedule = TrainSchedule(n_epochs=2, steps_per_epoch=2, batch_size=8, device="cpu")
+    tiny = dict(n_layers=1, n_heads=2, ffn_dim=16, diffusion_steps=20, sampling_steps=5)
+    gen = MotionDiffusionGenerator(16, **tiny, schedule=schedule, random_state=0).fit(small_set)
+    gen.save(tmp_path / "mdm.safetensors")
+    first = {k: v.clone() for k, v in gen.network_.state_dict().items()}
+    more = MotionDiffusionGenerator.load(tmp_path / "mdm.safetensors")
+    more.set_params(warm_start=True, schedule=replace(schedule, n_epochs=3)).fit(small_set)
+    assert [h["epoch"] for h in more.history_] == [0, 1, 2, 3, 4] and more.train_seconds_ >= gen.train_seconds_
+    moved = max(float((more.network_.state_dict()[k] - v.half().float()).abs().max()) for k, v in first.items()
+                if v.is_floating_point())
+    assert moved > 0  # it trained on from the saved weights, which a fresh fit would not reproduce
+    fresh = MotionDiffusionGenerator(16, **tiny, schedule=replace(schedule, n_epochs=3), random_state=0).fit(small_set)
+    assert len(fresh.history_) == 3
+    # a checkpointed run stopped by its time limit after one epoch resumes there and finishes its 3 epochs
+    ckpt = tmp_path / "run.ckpt"
+    MotionDiffusionGenerator(16, **tiny, schedule=replace(schedule, n_epochs=3, max_seconds=0.0),
+                             random_state=0).fit(small_set, checkpoint=ckpt)  # stops after its first epoch
+    resumed = MotionDiffusionGenerator(16, **tiny, schedule=replace(schedule, n_epochs=3), random_state=0).fit(
+        small_set, checkpoint=ckpt)
+    assert [h["epoch"] for h in resumed.history_] == [0, 1, 2]
+    with pytest.raises(ValueError, match="action names"):
+        MotionDiffusionGenerator.load(tmp_path / "mdm.safetensors").set_params(
+            warm_start=True, action_names=["a", "b"]).fit(small_set)

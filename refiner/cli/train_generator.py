@@ -1,4 +1,4 @@
-"""``motion-refiner train-generator``: train a reference generator (a2m or actor) on HumanAct12."""
+"""``motion-refiner train-generator``: train a reference generator (a2m, actor or mdm) on HumanAct12."""
 from __future__ import annotations
 
 import argparse
@@ -21,6 +21,12 @@ def train_generator_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-seconds", type=float, default=None,
                    help="training time limit (default none: fixed epochs with early stopping, reproducible)")
+    p.add_argument("--epochs", type=int, default=None,
+                   help="epochs of the schedule (the learning rate decays to 0 over them; default the generator's)")
+    p.add_argument("--init", type=Path, default=None,
+                   help="a saved generator of the same kind (e.g. the shipped one) to go on training from")
+    p.add_argument("--checkpoint", type=Path, default=None,
+                   help="training state saved every epoch; rerunning the same command resumes from it")
     p.add_argument("--device", default="auto", help="auto (CUDA when available), cpu, cuda, ...")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--quick", action="store_true", help="tiny network, a few steps (for tests)")
@@ -34,10 +40,12 @@ def train_generator_run(args: argparse.Namespace) -> int:
     command = "motion-refiner train-generator " + " ".join(
         shlex.quote(a) for a in (f"--kind={args.kind}", f"--out={args.out}", f"--split={args.split}", f"--seed={args.seed}")
         + ((f"--max-seconds={args.max_seconds:g}",) if args.max_seconds else ())
+        + ((f"--epochs={args.epochs}",) if args.epochs else ()) + ((f"--init={args.init}",) if args.init else ())
         + ((f"--threads={args.threads}",) if args.threads else ()) + (("--quick",) if args.quick else ()))
     gen = train_reference_generator(args.kind, dataset, args.out, split=args.split, quick=args.quick,
                                     max_seconds=args.max_seconds, random_state=args.seed, device=args.device,
-                                    verbose=True, command=command)
+                                    verbose=True, command=command, n_epochs=args.epochs, init=args.init,
+                                    checkpoint=args.checkpoint)
     best = min((h["val"] for h in gen.history_ if "val" in h), default=float("nan"))
     print(f"trained {type(gen).__name__} ({args.kind}) on HumanAct12 split {args.split!r}: "
           f"{gen.n_parameters():,} parameters, {len(gen.history_)} epochs, best validation loss {best:.4f}, "

@@ -7,6 +7,7 @@ raw output into :class:`~refiner.Motion` s through the plugin contract (adapter 
 """
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from typing import Sequence
@@ -43,8 +44,16 @@ class ReferenceGenerator(NetworkComponent):
     adapter = "action2motion"
     _desc = "reference generator"
 
-    def fit(self, data) -> "ReferenceGenerator":
-        """Train on labelled HumanAct12 clips (a MotionDataset or a sequence of Motions); returns self."""
+    def fit(self, data, *, checkpoint: str | os.PathLike | None = None) -> "ReferenceGenerator":
+        """Train on labelled HumanAct12 clips (a MotionDataset or a sequence of Motions); returns self.
+
+        With ``checkpoint`` (a path) the training state is saved there every epoch and a run that
+        finds the file resumes from it. With ``warm_start`` a fitted generator goes on training its
+        network under the current ``schedule`` (the same action names and fitted statistics).
+        """
+        warm = bool(getattr(self, "warm_start", False)) and hasattr(self, "network_")
+        if warm and list(self.action_names or self.action_names_) != list(self.action_names_):
+            raise ValueError("`warm_start` needs the fitted generator's action names; got different ones.")
         self.action_names = list(self.action_names or HUMANACT12_ACTIONS)
         _check_schedule(self)
         rng = check_random_state(self.random_state)
@@ -52,7 +61,9 @@ class ReferenceGenerator(NetworkComponent):
         started = time.perf_counter()
         clips, labels, val_clips, val_labels = self._split(data, rng)
         self.action_names_ = list(self.action_names)
-        self._fit_statistics(clips)
+        previous = (list(self.history_), float(self.train_seconds_)) if warm else ([], 0.0)
+        if not warm:
+            self._fit_statistics(clips)
         train = self._crops(clips)
         val = self._crops(val_clips) if val_clips else None
 
@@ -61,11 +72,15 @@ class ReferenceGenerator(NetworkComponent):
             return self._batch(crops.sample(idx, r), actions, device)
 
         with seeded(rng):
-            self.network_ = self._make_network({"action_names_": self.action_names_}).to(device)
+            if not warm:
+                self.network_ = self._make_network({"action_names_": self.action_names_})
+            self.network_.to(device)
             val_batch = None if val is None else batch(val, val_labels, np.arange(len(val)), np.random.default_rng(0))
-            self.history_ = fit_network(self.network_, self._loss, lambda idx, r: batch(train, labels, idx, r),
-                                        len(train), val_batch, self._schedule(), rng, desc=self._desc)
-        self.train_seconds_ = round(time.perf_counter() - started, 1)
+            history = fit_network(self.network_, self._loss, lambda idx, r: batch(train, labels, idx, r),
+                                  len(train), val_batch, self._schedule(), rng, checkpoint=checkpoint, desc=self._desc)
+        offset = len(previous[0])
+        self.history_ = previous[0] + [{**h, "epoch": h["epoch"] + offset} for h in history]
+        self.train_seconds_ = round(previous[1] + time.perf_counter() - started, 1)
         return self
 
     def adapter_options(self) -> dict:

@@ -99,6 +99,9 @@ class MotionDiffusionGenerator(JointsGenerator):
         No early stopping (the validation loss of random timesteps is noisy); the shipped weights stopped
         at the 2,100 s time limit (``--max-seconds``), epoch 676.
     random_state : int or None, default=0
+    warm_start : bool, default=False
+        When fitted already, :meth:`fit` goes on training the fitted network (a fresh ``schedule``)
+        instead of starting anew; ``history_`` and ``train_seconds_`` then add up.
 
     Attributes
     ----------
@@ -117,7 +120,7 @@ class MotionDiffusionGenerator(JointsGenerator):
                  diffusion_steps: int = 100, sampling_steps: int = 50, guidance: float = 2.5, cond_dropout: float = 0.1,
                  velocity_weight: float = 1.0, n_frames: int = N_FRAMES, action_names: Sequence[str] | None = None,
                  schedule: TrainSchedule = TrainSchedule(n_epochs=3000, batch_size=64, learning_rate=2e-4, patience=3000),
-                 random_state: int | None = 0):
+                 random_state: int | None = 0, warm_start: bool = False):
         self.d_model = d_model
         self.n_layers = n_layers
         self.n_heads = n_heads
@@ -131,6 +134,7 @@ class MotionDiffusionGenerator(JointsGenerator):
         self.action_names = action_names
         self.schedule = schedule
         self.random_state = random_state
+        self.warm_start = warm_start
 
     def _make_network(self, fitted: dict) -> MotionDenoiser:
         if not 1 <= self.sampling_steps <= self.diffusion_steps:

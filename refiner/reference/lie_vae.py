@@ -186,6 +186,9 @@ class LieVAEGenerator(ReferenceGenerator):
     n_frames : int, default=60
     schedule : TrainSchedule, default=TrainSchedule(n_epochs=110, batch_size=128, learning_rate=1e-3, patience=30)
     random_state : int or None, default=0
+    warm_start : bool, default=False
+        When fitted already, :meth:`fit` goes on training the fitted network (a fresh ``schedule``)
+        instead of starting anew; ``history_`` and ``train_seconds_`` then add up.
 
     Attributes
     ----------
@@ -212,7 +215,7 @@ class LieVAEGenerator(ReferenceGenerator):
     def __init__(self, hidden: int = 128, *, latent_dim: int = 30, kl_weight: float = 1e-2, teacher_forcing: float = 0.0,
                  n_frames: int = N_FRAMES, action_names: Sequence[str] | None = None,
                  schedule: TrainSchedule = TrainSchedule(n_epochs=110, batch_size=128, learning_rate=1e-3, patience=30),
-                 random_state: int | None = 0):
+                 random_state: int | None = 0, warm_start: bool = False):
         self.hidden = hidden
         self.latent_dim = latent_dim
         self.kl_weight = kl_weight
@@ -221,6 +224,7 @@ class LieVAEGenerator(ReferenceGenerator):
         self.action_names = action_names
         self.schedule = schedule
         self.random_state = random_state
+        self.warm_start = warm_start
 
     def _make_network(self, fitted: dict) -> LieVAE:
         return LieVAE(LieVAEConfig(len(fitted["action_names_"]), 72, self.hidden, self.latent_dim))

@@ -65,7 +65,8 @@ def load_reference_generator(kind: str = "a2m", *, folder: str | os.PathLike | N
 
 def train_reference_generator(kind: str, dataset, out: str | os.PathLike, *, split: str = "train", quick: bool = False,
                               max_seconds: float | None = None, random_state: int = 0, device: str = "auto",
-                              verbose: bool = False, command: str = ""):
+                              verbose: bool = False, command: str = "", n_epochs: int | None = None,
+                              init: str | os.PathLike | None = None, checkpoint: str | os.PathLike | None = None):
     """Train one reference generator on a split of HumanAct12 and save it (float16) with a manifest entry.
 
     Parameters
@@ -88,6 +89,13 @@ def train_reference_generator(kind: str, dataset, out: str | os.PathLike, *, spl
         Show a progress bar.
     command : str, optional
         The command line recorded in the manifest.
+    n_epochs : int, optional
+        Epochs of the schedule (its learning rate decays to 0 over them); default the class's.
+    init : path, optional
+        A saved generator of the same kind whose network training goes on from (``warm_start``);
+        the rest of its hyper-parameters are kept.
+    checkpoint : path, optional
+        Training state saved every epoch; a run that finds it resumes from it.
 
     Returns
     -------
@@ -96,16 +104,20 @@ def train_reference_generator(kind: str, dataset, out: str | os.PathLike, *, spl
     """
     cls = _kind(kind)
     data = dataset.split(split)
-    schedule = replace(cls().schedule, max_seconds=max_seconds, device=device, progress=verbose)
+    base = cls.load(init, device="cpu") if init is not None else cls()
+    schedule = replace(base.schedule, max_seconds=max_seconds, device=device, progress=verbose)
+    if n_epochs is not None:
+        schedule = replace(schedule, n_epochs=int(n_epochs), patience=max(schedule.patience, int(n_epochs)))
     if quick:
         schedule = replace(schedule, n_epochs=2, steps_per_epoch=2, batch_size=16, patience=5)
-    params: dict[str, Any] = {"schedule": schedule, "random_state": random_state}
-    if quick:
+    params: dict[str, Any] = {"schedule": schedule, "random_state": random_state, "warm_start": init is not None}
+    if quick and init is None:
         params.update({"hidden": 16, "latent_dim": 4} if kind == "a2m" else
                       {"d_model": 16, "n_layers": 1, "n_heads": 2, "ffn_dim": 16})
         if kind == "mdm":
             params.update(diffusion_steps=20, sampling_steps=5)
-    gen = cls(**params).fit(data)
+    gen = (base.set_params(**params) if init is not None else cls(**params)).fit(data, checkpoint=checkpoint)
+    gen.set_params(warm_start=False)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{kind}.safetensors"

@@ -117,6 +117,9 @@ class TransformerCVAEGenerator(JointsGenerator):
     n_frames : int, default=60
     schedule : TrainSchedule, default=TrainSchedule(n_epochs=150, batch_size=64, learning_rate=1e-3, patience=40)
     random_state : int or None, default=0
+    warm_start : bool, default=False
+        When fitted already, :meth:`fit` goes on training the fitted network (a fresh ``schedule``)
+        instead of starting anew; ``history_`` and ``train_seconds_`` then add up.
 
     Attributes
     ----------
@@ -135,7 +138,7 @@ class TransformerCVAEGenerator(JointsGenerator):
                  kl_weight: float = 1e-2, velocity_weight: float = 1.0, n_frames: int = N_FRAMES,
                  action_names: Sequence[str] | None = None,
                  schedule: TrainSchedule = TrainSchedule(n_epochs=150, batch_size=64, learning_rate=1e-3, patience=40),
-                 random_state: int | None = 0):
+                 random_state: int | None = 0, warm_start: bool = False):
         self.d_model = d_model
         self.n_layers = n_layers
         self.n_heads = n_heads
@@ -147,6 +150,7 @@ class TransformerCVAEGenerator(JointsGenerator):
         self.action_names = action_names
         self.schedule = schedule
         self.random_state = random_state
+        self.warm_start = warm_start
 
     def _make_network(self, fitted: dict) -> TransformerCVAE:
         return TransformerCVAE(TransformerCVAEConfig(len(fitted["action_names_"]), 24, self.d_model, self.n_layers,
