@@ -52,6 +52,14 @@ def test_no_training_flaw_moves_the_body_horizontally(rng):
         f = synthesize(still, rng, kinds=[kind], clean_probability=0.0, max_flaws=1)
         np.testing.assert_array_equal(f.joints[..., [0, 2]], still[..., [0, 2]].astype(np.float32))
         assert np.abs(f.joints[..., 1] - still[..., 1]).max() > 0.01
+    # a limb offset or drift moves a limb, never the root: a whole-body offset would be a glide
+    moved_root = moved_limb = 0
+    for seed in range(60):
+        for kind in ("limb_offset", "limb_drift"):
+            f = synthesize(still, np.random.default_rng(seed), kinds=[kind], clean_probability=0.0, max_flaws=1)
+            moved_root += int(np.abs(f.joints[:, 0] - still[:, 0]).max() > 0)
+            moved_limb += int(np.abs(f.joints - still).max() > 0.005)
+    assert moved_root == 0 and moved_limb > 100
 
 
 def test_mirror_pairs_and_limbs():
