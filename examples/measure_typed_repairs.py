@@ -13,7 +13,8 @@ calibrate on, never the benchmark's 11-12), corrupted by the benchmark's familie
 (seed 500 + clip index), refined with the true action; prints the share of the flaw's added MPJPE
 removed per family and the mean, and the clean clips' MPJPE change and share touched. The JSON
 overrides ``typed`` (group -> [repair, widen]), ``verify`` (groups verified), ``params`` (Refiner
-keywords), ``classifier`` (a FlawClassifier file to swap in). About 20 s on one CPU core.
+keywords), ``classifier`` (a FlawClassifier file to swap in), ``weights`` (a refiner folder instead of
+the shipped train-split weights). About 20 s on one CPU core.
 """
 import json
 import sys
@@ -35,7 +36,8 @@ cfg = json.loads(sys.argv[1]) if len(sys.argv) > 1 else {}
 lp.TYPED_REPAIRS.update({k: tuple(v) for k, v in cfg.get("typed", {}).items()})
 if "verify" in cfg:
     lp.VERIFY_TYPED = tuple(cfg["verify"])
-model = Refiner.pretrained("humanact12", split="train", **cfg.get("params", {}))
+model = (Refiner.load(cfg["weights"], **cfg.get("params", {})) if "weights" in cfg
+         else Refiner.pretrained("humanact12", split="train", **cfg.get("params", {})))
 if "classifier" in cfg:
     model.flaw_classifier = FlawClassifier.load(cfg["classifier"])
 families = sys.argv[2].split(",") if len(sys.argv) > 2 else FLAW_FAMILIES

@@ -16,11 +16,14 @@ SHIPPED_TRAIN = Refiner.pretrained.__globals__["_WEIGHTS"] / "humanact12-train"
 
 @pytest.fixture(scope="module")
 def tiny_learned(humanact12, tmp_path_factory):
-    """Both learned parts trained with the tiny configuration on 72 real clips, installed beside the shipped parts."""
+    """The learned parts (and the optional denoiser) trained with the tiny configuration on 72 real clips,
+    installed beside the shipped parts."""
     from refiner.refinement.train_learned import train_learned_refiner
 
     pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[::15][:6]]  # many subjects
     out = tmp_path_factory.mktemp("tiny_learned")
+    assert train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN,
+                                 only="flaw_denoiser") is None  # the optional part, installed with the others
     refiner = train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN)
     return refiner, out
 
@@ -35,12 +38,13 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert 0.05 <= refiner.flaw_classifier.threshold_ <= 0.999 and refiner.detect == "classifier"
     assert refiner.manifest["learned"]["flaw_threshold"] == pytest.approx(refiner.flaw_recognizer.threshold_)
     again = Refiner.load(out)
+    assert again.flaw_denoiser is not None and again.flaw_denoiser.skeleton_ == "humanact12"
     x = humanact12[10].joints[:50]
     np.testing.assert_allclose(again.flaw_recognizer.predict(x[None])["flaw"],
                                refiner.flaw_recognizer.predict(x[None])["flaw"], atol=1e-3)  # float16 weights
     before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
     parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
-    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer"}
+    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "flaw_denoiser"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
 
 
@@ -154,6 +158,31 @@ def test_learned_refiner_does_no_harm_and_reports(tiny_learned, humanact12):
         res, rep = other.refine(clip, return_report=True)
         assert res.joints.shape == clip.joints.shape and np.isfinite(res.joints).all()
         np.testing.assert_array_equal(res.joints[~rep.changed_frames], clip.joints[~rep.changed_frames])
+
+
+@pytest.mark.real_data
+def test_denoiser_repairs_and_detects_when_asked_and_smoothing_stands_in_without_it(tiny_learned, humanact12, monkeypatch):
+    import refiner.refinement.learned_pipeline as lp
+
+    refiner, out = tiny_learned
+    monkeypatch.setattr(lp, "TYPED_REPAIRS", {g: ("denoise", 0) for g in lp.TYPED_REPAIRS})
+    monkeypatch.setattr(lp, "VERIFY_TYPED", ())
+    clip = humanact12[700]
+    model = Refiner.load(out, detect="classifier+denoiser")
+    model.flaw_classifier.threshold_ = 1e-6  # flag every frame
+    res, rep = model.refine(clip, return_report=True)
+    assert {c["repair"] for c in rep.changes} == {"denoise"} and "denoiser correction" in rep.changes[0]["reason"]
+    assert len(rep.denoiser_correction_cm) == clip.n_frames
+    np.testing.assert_array_equal(res.joints[~rep.changed_frames], clip.joints[~rep.changed_frames])
+    model.flaw_denoiser = None  # weights without a denoiser: smoothing stands in
+    model.detect = "classifier"
+    _, rep = model.refine(clip, return_report=True)
+    assert {c["repair"] for c in rep.changes} == {"smooth"}
+    with pytest.raises(ValueError, match="flaw_denoiser"):
+        Refiner(*[getattr(model, n) for n in ("recognizer", "anchor_refiner", "transition_generator",
+                                               "transition_refiner", "anchor_concepts", "anchor_quality",
+                                               "flaw_recognizer", "flaw_repairer", "flaw_classifier")],
+                detect="classifier+denoiser")
 
 
 @pytest.mark.real_data

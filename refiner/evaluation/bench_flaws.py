@@ -6,8 +6,8 @@ that a refiner removes, ``100 * (1 - MPJPE(refined) / MPJPE(flawed))`` against t
 per family, with the families whose mechanism training never used
 (:data:`refiner.refinement.training_flaws.HELD_OUT_FAMILIES`) reported apart. The *oracle* rows isolate the
 repair step: they are given the true flaw mask and replace exactly those frames, by linear
-interpolation, by the repair network in-filling them (frames hidden), or by the repair network
-seeing them (frames given).
+interpolation, by the repair network in-filling them (frames hidden), by the repair network
+seeing them (frames given), or by the flaw denoiser correcting them (when the weights have one).
 
 The record (``flaws.json``): ``clips``, ``severities``, ``families``, ``held_out_families``, the refiners
 ``skipped`` (name -> why), ``clean`` (name -> ``mpjpe_change_cm``, ``share_changed``), ``flawed`` (the
@@ -29,7 +29,7 @@ from refiner.refinement.training_flaws import HELD_OUT_FAMILIES
 
 __all__ = ["bench_flaws", "flaw_records", "ORACLES"]
 
-ORACLES = ("oracle_linear", "oracle_infill", "oracle_given")
+ORACLES = ("oracle_linear", "oracle_infill", "oracle_given", "oracle_denoise")
 
 
 def _oracle(name: str, model, flawed: np.ndarray, mask: np.ndarray, action: int) -> np.ndarray:
@@ -38,6 +38,8 @@ def _oracle(name: str, model, flawed: np.ndarray, mask: np.ndarray, action: int)
         return flawed
     if name == "oracle_linear":
         proposal = linear_infill(flawed, mask)
+    elif name == "oracle_denoise":
+        proposal = model.flaw_denoiser.denoise(flawed[None], mask[None])[0]
     else:
         proposal = model.flaw_repairer.repair(flawed[None], mask[None], [action], hide=name == "oracle_infill")[0]
     out = flawed.copy()
@@ -67,7 +69,8 @@ def flaw_records(clips, refiners: dict, *, severities=(2,), model=None, families
             flawed = [corrupt(m, family, severity, random_state=i, segmentation=segs[i], donors=donors[i])
                       for i, m in enumerate(clips)]
             base = None
-            names = list(refiners) + (list(ORACLES) if model is not None else [])
+            oracles = [o for o in ORACLES if o != "oracle_denoise" or getattr(model, "flaw_denoiser", None) is not None]
+            names = list(refiners) + (oracles if model is not None else [])
             for name in names:
                 if name in ORACLES:
                     outs = [_oracle(name, model, c.motion.numpy(), c.mask, m.action) for c, m in zip(flawed, clips)]

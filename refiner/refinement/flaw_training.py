@@ -34,9 +34,10 @@ class FlawBatches:
     Parameters
     ----------
     clips : sequence of ndarray (T_i, J, 3), metres
-    actions : sequence of int
-    anchors : sequence of int arrays
-        Segmentation anchors of each clip (anchor-recognition targets).
+    actions : sequence of int, or None
+        None for an action-agnostic network (every item gets action 0 of 1).
+    anchors : sequence of int arrays, or None
+        Segmentation anchors of each clip (anchor-recognition targets; None: no anchor targets).
     skeleton : str
     lengths : (int, int)
         Crop lengths are drawn per batch from this range; shorter clips are padded (``valid``).
@@ -49,8 +50,9 @@ class FlawBatches:
                  lengths: tuple[int, int] = (32, 64), kinds=None, hide_probability: float = 0.3,
                  drop_action_probability: float = 0.2, n_actions: int | None = None):
         self.clips = [np.asarray(c, dtype=np.float32) for c in clips]
-        self.actions = np.asarray(actions, dtype=np.int64)
-        self.targets = [anchor_targets(len(c), a).astype(np.float32) for c, a in zip(self.clips, anchors)]
+        self.actions = np.zeros(len(self.clips), np.int64) if actions is None else np.asarray(actions, dtype=np.int64)
+        self.targets = [np.zeros(len(c), np.float32) if anchors is None else anchor_targets(len(c), a).astype(np.float32)
+                        for c, a in zip(self.clips, anchors if anchors is not None else self.clips)]
         self.skeleton = skeleton
         self.lengths = lengths
         self.kinds = kinds
@@ -60,6 +62,11 @@ class FlawBatches:
 
     def __len__(self) -> int:
         return len(self.clips)
+
+    def validation_batch(self, device="cpu", size: int = 256, seed: int = 12345) -> dict[str, torch.Tensor]:
+        """A fixed batch of ``size`` items (drawn with replacement from fewer clips) for model selection."""
+        rng = np.random.default_rng(seed)
+        return self.sample(rng.choice(len(self), size=min(size, len(self)), replace=len(self) < size), rng, device)
 
     def sample(self, indices: Sequence[int], rng: np.random.Generator, device="cpu") -> dict[str, torch.Tensor]:
         """A batch of ``len(indices)`` items as tensors on ``device`` (see the module docstring)."""

@@ -33,7 +33,7 @@ from refiner.refinement.report import RefinementReport, start_reports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
 from refiner.refinement.training_flaws import GROUPS
 
-__all__ = ["flag_runs", "refine_clips", "refine_batch", "check_detect", "REPAIRS", "DETECTORS"]
+__all__ = ["flag_runs", "refine_clips", "refine_batch", "check_detect", "REPAIRS", "DETECTORS", "STAND_INS"]
 
 #: ``repair="typed"``: per flagged run, the repair for the flaw group the classifier recognises
 #: (:data:`TYPED_REPAIRS`); ``"select"``: per flagged run, the candidate (the repair network's two proposals, the
@@ -69,6 +69,13 @@ _GROUP_NAMES = tuple(GROUPS)
 #: - the stall re-timing's window widened by 2 / 4 / 6 / 8 / 12 frames each side (a stall starts at
 #:   the anchor, before the detector is sure): frozen +45.9 / **+49.5** / +41.2 / +36.2 / +26.4 %,
 #:   time_warp -0.1 % throughout: **+13.5 %** in all.
+#: - the flaw denoiser (:class:`~refiner.refinement.flaw_denoiser.FlawDenoiser`, classifier retrained with
+#:   limb flaws that never move the root): the shipped table +13.6 % (jitter +17.7, foot_sliding +37.8);
+#:   noise -> ``denoise``, verified or not, widened by 4 or not: jitter +17.6 to +17.8 %, the same mean
+#:   (unverified smoothing: +24.7 %); adding the denoiser's whole-clip correction as a detector
+#:   (``detect="classifier+denoiser"``, threshold 2.6 cm at 3 % of clean clips) flagged no more drift
+#:   (-0.9 %); pose -> ``denoise+planted_feet`` verified: foot_sliding 0.0 %, mean +8.2 %; unverified with
+#:   that detector: anchor_drift -6.6 %, mean +12.1 %. So the denoiser stays an option, not the default.
 TYPED_REPAIRS = {"timing": ("stall_retime", 4), "root": ("network+planted_feet", 0), "pose": ("planted_feet", 0),
                  "noise": ("smooth", 0)}
 #: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
@@ -79,8 +86,8 @@ TYPED_REPAIRS = {"timing": ("stall_retime", 4), "root": ("network+planted_feet",
 VERIFY_TYPED = ("root", "pose", "noise")
 #: Detectors that can flag frames (``detect="classifier+recognizer"`` takes the union): the kinematic
 #: flaw classifier, the recognition network's flaw probability, the repair network's correction of
-#: the whole clip (how far it would move each frame).
-DETECTORS = ("classifier", "recognizer", "correction")
+#: the whole clip (how far it would move each frame), the denoiser's correction of the whole clip.
+DETECTORS = ("classifier", "recognizer", "correction", "denoiser")
 
 
 def check_detect(detect: str) -> str:
@@ -91,6 +98,9 @@ def check_detect(detect: str) -> str:
     return detect
 
 
+#: The hand-written repair that stands in for a network's proposal when the weights lack that network
+#: (weights trained before the denoiser existed smooth noise instead).
+STAND_INS = {"denoise": "smooth"}
 _ANCHOR_THRESHOLD = 0.3
 #: Frames on each side of a run that the selection's flaw score also covers (the seams).
 _SCORE_CONTEXT = 4
@@ -124,6 +134,7 @@ def flag_runs(prob: np.ndarray, threshold: float, *, min_run: int = 2, margin: i
 _HOW = {
     "network": "corrected from the given frames and context by the repair network",
     "network_infill": "in-filled from the context by the repair network",
+    "denoise": "corrected from the given frames by the denoising network",
     "retime": "re-timed along its own path with a smooth speed",
     "stall_retime": "re-timed along its own path with a smooth speed where it stalls",
     "forward_retime": "replayed forward only along its progress to the next kept pose",
@@ -167,6 +178,7 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
         share = groups[lo:hi].mean(0)
         group = _GROUP_NAMES[int(np.argmax(share))]
         name, widen = TYPED_REPAIRS[group]
+        name = "+".join(p if p in proposals else STAND_INS.get(p, p) for p in name.split("+"))  # weights without it
         a, c = max(lo - widen, 0), min(hi + widen, len(y))
         proposal = y
         for k, part in enumerate(name.split("+")):  # applied left to right
@@ -239,6 +251,10 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     if use_cor:
         correction = refiner.flaw_repairer.correction(clips, actions)
         cor_threshold = float(refiner.flaw_repairer.correction_threshold_)
+    use_den = "denoiser" in use
+    if use_den:
+        denoised = refiner.flaw_denoiser.correction(clips)
+        den_threshold = float(refiner.flaw_denoiser.threshold_)
     runs_per_clip, suspect = [], np.zeros(clips.shape[:2], bool)
     for b, report in enumerate(reports):
         if report.action is None:
@@ -260,6 +276,9 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
         if use_cor:
             report.correction_cm = [round(100 * float(c), 3) for c in correction[b]]
             score = np.maximum(score, correction[b] / max(cor_threshold, 1e-9))
+        if use_den:
+            report.denoiser_correction_cm = [round(100 * float(c), 3) for c in denoised[b]]
+            score = np.maximum(score, denoised[b] / max(den_threshold, 1e-9))
         runs = flag_runs(score, 1.0, min_run=refiner.min_run, margin=refiner.margin, low=refiner.hysteresis)
         kinds = []
         for lo, hi in runs:
@@ -280,6 +299,8 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
             proposals["network"] = refiner.flaw_repairer.repair(clips[todo], suspect[todo], acts)
         if refiner.repair in ("infill", "select") or "network_infill" in typed:
             proposals["network_infill"] = refiner.flaw_repairer.repair(clips[todo], suspect[todo], acts, hide=True)
+        if "denoise" in typed and refiner.flaw_denoiser is not None:
+            proposals["denoise"] = refiner.flaw_denoiser.denoise(clips[todo], suspect[todo])
         skel = get_skeleton(refiner.skeleton)
         for k, b in enumerate(todo):
             y, changed = clips[b].copy(), np.zeros(len(clips[b]), bool)
@@ -295,6 +316,9 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                 if use_cor:
                     evidence.append(f"repair correction up to {100 * float(np.max(correction[b][lo:hi])):.1f} cm "
                                     f"(threshold {100 * cor_threshold:.1f} cm)")
+                if use_den:
+                    evidence.append(f"denoiser correction up to {100 * float(np.max(denoised[b][lo:hi])):.2f} cm "
+                                    f"(threshold {100 * den_threshold:.2f} cm)")
                 name, (lo, hi), y_new, note = _repair_run(refiner, y, lo, hi, {n: p[k] for n, p in proposals.items()},
                                                           None if groups is None else groups[b], clips[b], skel)
                 if name == "keep":

@@ -76,12 +76,9 @@ class _LearnedStep(NetworkComponent):
             self.network_ = self._make_network({"n_joints_": self.n_joints_, "n_actions_": self.n_actions_, **fitted})
             self._set_buffers()
             self.network_.to(device)
-            val_rng = np.random.default_rng(12345)
-            val_batch = val.sample(val_rng.choice(len(val), size=min(256, len(val)), replace=len(val) < 256),
-                                   val_rng, device)
             self.history_ = fit_network(self.network_, self._loss, lambda idx, r: batches.sample(idx, r, device),
-                                        len(batches), val_batch, schedule, rng, checkpoint=checkpoint,
-                                        desc=desc)
+                                        len(batches), val.validation_batch(device), schedule, rng,
+                                        checkpoint=checkpoint, desc=desc)
         self.network_.to("cpu").eval()
         return self
 

@@ -30,6 +30,7 @@ from refiner.refinement.anchor_recognition import AnchorRecognizer
 from refiner.refinement.anchor_refinement import AnchorRefiner
 from refiner.refinement.converted_refinement import ConvertedRefiner
 from refiner.refinement.flaw_classifier import FlawClassifier
+from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.inputs import MODES, auto_threads, check_choice, check_metres, check_metres_each, check_threads, thread_limits
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.report import RefinementReport
@@ -49,6 +50,7 @@ _PARTS = {
     "flaw_recognizer": FlawRecognizer,
     "flaw_repairer": FlawRepairer,
     "flaw_classifier": FlawClassifier,
+    "flaw_denoiser": FlawDenoiser,
 }
 _NO_DEVICE = ("anchor_concepts", "anchor_quality")
 #: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
@@ -69,8 +71,9 @@ class Refiner:
         :class:`TransitionRefiner`, :class:`AnchorConcepts`.
     anchor_quality : AnchorQuality, optional
         Needed for ``quality="pose"`` and ``anchor_method="posterior"``.
-    flaw_recognizer, flaw_repairer, flaw_classifier : optional
-        The learned steps (:class:`FlawRecognizer`, :class:`FlawRepairer`, :class:`FlawClassifier`).
+    flaw_recognizer, flaw_repairer, flaw_classifier, flaw_denoiser : optional
+        The learned steps (:class:`FlawRecognizer`, :class:`FlawRepairer`, :class:`FlawClassifier`,
+        :class:`FlawDenoiser`; without the denoiser, noise is smoothed instead).
     skeleton : str, default="humanact12"
     action_names : sequence of str
     mode : {"full", "anchor", "transition"}, default="full"
@@ -108,7 +111,8 @@ class Refiner:
     """
 
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
-                 anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None, *,
+                 anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None,
+                 flaw_denoiser=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, change_penalty: float = 0.01, hysteresis: float = 0.5,
@@ -117,6 +121,7 @@ class Refiner:
         self.recognizer, self.anchor_refiner, self.anchor_concepts = recognizer, anchor_refiner, anchor_concepts
         self.transition_generator, self.transition_refiner = transition_generator, transition_refiner
         self.flaw_recognizer, self.flaw_repairer, self.flaw_classifier = flaw_recognizer, flaw_repairer, flaw_classifier
+        self.flaw_denoiser = flaw_denoiser
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
         if self.method == "learned" and not learned:
@@ -132,6 +137,8 @@ class Refiner:
         for option, needs in (("detect", "classifier" in self.detect.split("+")), ("repair", repair in ("select", "typed"))):
             if needs and learned and flaw_classifier is None:
                 raise ValueError(f"{option}={getattr(self, option)!r} needs a `flaw_classifier`.")
+        if learned and "denoiser" in self.detect.split("+") and flaw_denoiser is None:
+            raise ValueError(f"detect={self.detect!r} needs a `flaw_denoiser`, which these weights lack.")
         self.min_run, self.margin, self.rigid_tolerance = int(min_run), int(margin), float(rigid_tolerance)
         self.change_penalty, self.hysteresis = float(change_penalty), float(hysteresis)
         self.quality = check_choice("quality", quality, concepts_pipeline.QUALITY)

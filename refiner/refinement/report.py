@@ -24,6 +24,7 @@ class RefinementReport:
     anchor_probability: list[float] = field(default_factory=list)
     flaw_probability: list[float] = field(default_factory=list)
     correction_cm: list[float] = field(default_factory=list)
+    denoiser_correction_cm: list[float] = field(default_factory=list)
     anchor_scores: list[float] = field(default_factory=list)
     threshold: float | None = None
     flagged_anchors: list[int] = field(default_factory=list)

@@ -17,10 +17,11 @@ from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.segmentation import segment
 from refiner.io.datasets import MotionDataset
 from refiner.refinement.flaw_classifier import FlawClassifier
+from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
 
-__all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "train_learned", "train_learned_refiner", "install_learned",
+__all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
            "calibrate_learned", "calibration_split", "CLIP_RATE"]
 
 #: Share of held-out real clips each detector may flag (both together: at most twice this).
@@ -38,7 +39,17 @@ LEARNED_CONFIGS = {
 #: holds the fields that differ from the estimator's default schedule.
 CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, copies=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
+#: The flaw denoiser's settings (about 20 minutes on one CPU core) and its tiny test version.
+DENOISER_CONFIGS = {"default": dict(schedule=dict()),
+                    "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer")
+#: Parts trained only when asked (``only=``): the denoiser is an option of the refiner, not a default
+#: step (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
+#: it is calibrated and installed with the others.
+OPTIONAL_PARTS = ("flaw_denoiser",)
+_CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
+            "flaw_denoiser": FlawDenoiser}
+_CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": DENOISER_CONFIGS}
 
 
 def calibration_split(subjects) -> np.ndarray:
@@ -54,21 +65,22 @@ def calibration_split(subjects) -> np.ndarray:
 def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all", config: str = "default",
                   only: str | None = None, device: str = "auto", random_state: int = 0, max_seconds: float | None = None,
                   anchor_concepts: AnchorConcepts | None = None, progress: bool = False) -> dict:
-    """Train one or both learned parts into ``out/parts/`` (checkpoints there make a rerun resume).
+    """Train the learned parts (:data:`LEARNED_PARTS`), or the one named ``only`` (which may be one of
+    :data:`OPTIONAL_PARTS`), into ``out/parts/`` (checkpoints there make a rerun resume).
 
-    Returns ``{name: fitted part}`` for the parts trained or found finished.
+    Returns ``{name: fitted part}`` for the parts trained or found finished (with ``only=None``, the
+    optional parts found there too).
     """
-    if only is not None and only not in LEARNED_PARTS:
-        raise ValueError(f"unknown learned part {only!r}; known: {', '.join(LEARNED_PARTS)}.")
+    if only is not None and only not in LEARNED_PARTS + OPTIONAL_PARTS:
+        raise ValueError(f"unknown learned part {only!r}; known: {', '.join(LEARNED_PARTS + OPTIONAL_PARTS)}.")
     if config not in LEARNED_CONFIGS:
         raise ValueError(f"unknown config {config!r}; known: {', '.join(LEARNED_CONFIGS)}.")
     parts_dir = Path(out) / "parts"
     parts_dir.mkdir(parents=True, exist_ok=True)
-    names = [n for n in LEARNED_PARTS if only is None or n == only]
-    classes = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer}
-    done = {n: classes[n].load(parts_dir / f"{n}.safetensors") for n in names
-            if (parts_dir / f"{n}.safetensors").is_file()}
-    if len(done) == len(names):
+    names = list(LEARNED_PARTS) if only is None else [only]
+    done = {n: _CLASSES[n].load(parts_dir / f"{n}.safetensors") for n in (*names, *OPTIONAL_PARTS)
+            if (n in names or only is None) and (parts_dir / f"{n}.safetensors").is_file()}
+    if all(n in done for n in names):
         return done
     data = dataset.split(split)
     skeleton = data.motions[0].skeleton
@@ -87,11 +99,11 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         if name in done:
             continue
         t0 = time.perf_counter()
-        cls = classes[name]
-        cfg = dict((CLASSIFIER_CONFIGS if cls is FlawClassifier else LEARNED_CONFIGS)[config])
+        cls = _CLASSES[name]
+        cfg = dict(_CONFIGS.get(name, LEARNED_CONFIGS)[config])
         schedule = replace(cls().schedule, **cfg.pop("schedule"), **run)
         est = cls(**cfg, schedule=schedule, random_state=random_state)
-        if name == "flaw_classifier":
+        if name in ("flaw_classifier", "flaw_denoiser"):  # action-agnostic: clips alone
             est.fit(pick(fit_idx)[0], skeleton=skeleton, validation=pick(cal_idx)[0],
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         elif name == "flaw_recognizer":
@@ -123,9 +135,12 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.flaw_classifier = parts["flaw_classifier"]
     refiner.flaw_recognizer = parts["flaw_recognizer"]
     refiner.flaw_repairer = parts["flaw_repairer"]
+    refiner.flaw_denoiser = parts.get("flaw_denoiser")
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
                                    "classifier_threshold": float(parts["flaw_classifier"].threshold_),
-                                   "correction_threshold_m": float(parts["flaw_repairer"].correction_threshold_)}
+                                   "correction_threshold_m": float(parts["flaw_repairer"].correction_threshold_),
+                                   **({"denoiser_threshold_m": float(parts["flaw_denoiser"].threshold_)}
+                                      if parts.get("flaw_denoiser") is not None else {})}
     refiner.save(out or folder, half=True)
     return Refiner.load(out or folder)
 
@@ -141,7 +156,7 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
     if base is None:
         base = _WEIGHTS / (f"{dataset.name}" + ("" if split == "all" else f"-{split}"))
     info = {}
-    for name in LEARNED_PARTS:
+    for name in LEARNED_PARTS + OPTIONAL_PARTS:
         log_path = Path(out) / "parts" / f"{name}.json"
         if log_path.is_file():
             info[name] = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"}
@@ -157,4 +172,6 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
     return {"classifier_threshold": parts["flaw_classifier"].calibrate(clips, clip_rate=clip_rate),
             "flaw_threshold": parts["flaw_recognizer"].calibrate(clips, actions, clip_rate=clip_rate),
             "correction_threshold_m": parts["flaw_repairer"].calibrate(clips, actions, clip_rate=clip_rate),
+            **({"denoiser_threshold_m": parts["flaw_denoiser"].calibrate(clips, clip_rate=clip_rate)}
+               if "flaw_denoiser" in parts else {}),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}
