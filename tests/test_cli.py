@@ -102,6 +102,8 @@ def test_bench_generators_quick(tmp_path):
         assert row["samples"] == 3 * 12, key
         assert _finite(*m["fid"]) and m["fid"][0] > 0 and m["fid"][1] >= 0, key
         assert 0.0 <= m["accuracy"][0] <= 1.0 and m["diversity"][0] > 0, key
+        phys = row["physics"]
+        assert phys["acceleration"] > 0 and 0 <= phys["foot_skating"] <= 1 and phys["bone_length_variation"] >= 0, key
         if key.endswith("/refined"):
             assert 0.0 <= row["frames_changed"] <= 1.0 and row["flagged_anchors_per_clip"] >= 0, key
             assert row["refine_seconds_per_clip"] > 0, key
@@ -110,3 +112,6 @@ def test_bench_generators_quick(tmp_path):
     # real held-out clips are closer to the reference than any generator's samples
     assert all(rows["real"]["metrics"]["fid"][0] < row["metrics"]["fid"][0] for k, row in rows.items() if k != "real")
     assert rows["real"]["metrics"]["accuracy"][0] > 0.9
+    # mocap bones are rigid; the joint generators' stretch, and refinement puts them back on rigid bones
+    assert rows["real"]["physics"]["bone_length_variation"] < 1e-3
+    assert rows["mdm/refined"]["physics"]["bone_length_variation"] < 0.1 * rows["mdm/generated"]["physics"]["bone_length_variation"]

@@ -146,18 +146,22 @@ def _generators(rec: dict) -> str:
         rows.append(["real clips (subjects 1-10)", "real"] if key == "real" else key.split("/"))
         rows[-1] += [_pm(m["accuracy"], 100, ".1f"), _pm(m["fid"]), f"{m['diversity'][0]:.3f}",
                      f"{m['multimodality'][0]:.3f}"]
+        phys = r.get("physics")
+        rows[-1] += [f"{phys['acceleration']:.2f}", f"{100 * phys['foot_skating']:.1f}",
+                     f"{100 * phys['bone_length_variation']:.2f}"] if phys else ["", "", ""]
         rows[-1] += [f"{100 * r['frames_changed']:.1f}", f"{r['flagged_anchors_per_clip']:.2f}",
                      f"{r['refine_seconds_per_clip']:.2f}"] if "frames_changed" in r else ["", "", ""]
     return "\n".join([
         f"## Reference generators (HumanAct12; {rec['per_action']} samples per action, refiner trained on subjects "
         f"1-10, reference: {rec['reference_clips']} clips of subjects 11-12)", "",
-        "Both generators were trained on subjects 1-10 (`motion-refiner train-generator`). Each sample is "
+        "The generators were trained on subjects 1-10 (`motion-refiner train-generator`). Each sample is "
         "converted by the `action2motion` adapter and refined with its sampled action by "
         "`Refiner.pretrained(split=\"train\")`. Metrics follow the Action2Motion protocol "
         f"(`refiner.evaluation.metrics.evaluate`, random GRU hidden state, {rec['n_replications']} replications, "
         "mean ± 95 % interval), real crops drawn with the generated action mixture. Accuracy is the recogniser's on "
         "the samples.", "",
         markdown_table(["generator", "samples", "accuracy %", "FID", "diversity", "multimodality",
+                        "acceleration m/s²", "foot skating %", "bone-length variation %",
                         "frames changed %", "flagged anchors / clip", "refine s / clip"], rows)])
 
 

@@ -2,9 +2,11 @@
 
 The record (``generators.json``): ``per_action`` (samples per HumanAct12 action), ``n_replications``,
 ``reference_clips`` (real clips of subjects 11-12) and ``rows``: per ``<kind>/generated``,
-``<kind>/refined`` and ``real`` (train clips of subjects 1-10), ``samples`` and ``metrics``
-(:func:`~refiner.evaluation.protocol.evaluate` summary, metric -> ``[mean, 95 % half-width]``); refined
-rows also ``frames_changed`` (share), ``flagged_anchors_per_clip`` and ``refine_seconds_per_clip``.
+``<kind>/refined`` and ``real`` (train clips of subjects 1-10), ``samples``, ``metrics``
+(:func:`~refiner.evaluation.protocol.evaluate` summary, metric -> ``[mean, 95 % half-width]``) and
+``physics`` (:func:`physical_record`: mean joint acceleration m/s², foot-skating ratio, bone-length
+variation); refined rows also ``frames_changed`` (share), ``flagged_anchors_per_clip`` and
+``refine_seconds_per_clip``.
 """
 from __future__ import annotations
 
@@ -21,9 +23,19 @@ from refiner.evaluation.bench_setup import (
     summary_record,
     write_record,
 )
+from refiner.evaluation.ground_metrics import foot_skating_ratio
+from refiner.evaluation.physics import acceleration, bone_length_variation
 from refiner.evaluation.protocol import evaluate
 
-__all__ = ["bench_generators"]
+__all__ = ["bench_generators", "physical_record"]
+
+
+def physical_record(motions) -> dict:
+    """Means over HumanAct12 ``motions`` of their joint acceleration (m/s²), foot-skating ratio (share of
+    frame pairs) and bone-length variation (std / mean per bone, a share)."""
+    return {"acceleration": float(np.mean([acceleration(m) for m in motions])),
+            "foot_skating": float(np.mean([foot_skating_ratio(m) for m in motions])),
+            "bone_length_variation": float(np.mean([bone_length_variation(m) for m in motions]))}
 
 
 @one_thread()
@@ -57,7 +69,8 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
         for label, motions in (("generated", before), ("refined", after)):
             s = evaluate(recognizer, motions, real.motions, n_replications=n_rep, match_labels=True,
                          random_state=0).summary()
-            row = rec["rows"][f"{kind}/{label}"] = {"samples": len(motions), "metrics": summary_record(s)}
+            row = rec["rows"][f"{kind}/{label}"] = {"samples": len(motions), "metrics": summary_record(s),
+                                                    "physics": physical_record(motions)}
             if label == "refined":
                 row.update(frames_changed=float(np.mean([r.changed_frames.mean() for r in reports])),
                            flagged_anchors_per_clip=float(np.mean([len(r.flagged_anchors) for r in reports])),
@@ -65,5 +78,6 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
             progress("row", {"kind": kind, "label": label, "metrics": row["metrics"]})
     s = evaluate(recognizer, dataset.split("train").motions, real.motions, n_replications=n_rep,
                  n_generated=per_action * n_actions, match_labels=True, random_state=0).summary()
-    rec["rows"]["real"] = {"samples": per_action * n_actions, "metrics": summary_record(s)}
+    rec["rows"]["real"] = {"samples": per_action * n_actions, "metrics": summary_record(s),
+                           "physics": physical_record(dataset.split("train").motions)}
     return write_record(out, "generators", rec)
