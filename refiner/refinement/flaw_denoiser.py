@@ -170,7 +170,7 @@ class FlawDenoiser(NetworkComponent):
         bool, in one forward pass; frames not suspect come back unchanged."""
         check_is_fitted(self, "network_", msg=NOT_FITTED)
         given = np.array(joints, np.float32, copy=True)
-        mask = np.asarray(suspect, bool)
+        mask = np.array(suspect, bool, copy=True)
         if given.ndim != 4 or given.shape[2:] != (self.n_joints_, 3):
             raise ValueError(f"`joints` must be (B, T, {self.n_joints_}, 3); got shape {given.shape}.")
         if mask.shape != given.shape[:2]:
