@@ -12,12 +12,12 @@ from refiner.refinement.pipeline import Refiner
 
 @pytest.fixture(scope="module")
 def flawed(humanact12):
-    """A real 60-frame clip in float64 with a 0.3 m jump on frames 30-32 (flagged) and sub-float32
+    """A real 60-frame clip in float64 that stalls on frames 25-36 (flagged and re-timed) with sub-float32
     detail, and its action's name (so no test depends on inference)."""
     clip = humanact12[100]
     x = clip.crop(0, 60).joints.astype(np.float64)
     x = x + 1e-9 * np.arange(x.size).reshape(x.shape) / x.size  # lost when rounded through float32
-    x[30:33] += 0.3
+    x[25:37] = x[25]
     return x, humanact12.action_names[clip.action]
 
 
