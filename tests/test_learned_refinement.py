@@ -8,7 +8,8 @@ from refiner.core.skeletons import rigid_skeleton
 from refiner.core.skeletons import joint_bone_lengths, with_bone_lengths
 from refiner.evaluation.physics import bone_length_variation
 from refiner.refinement.flaw_networks import FlawRepairNet, FrameTransformerConfig
-from refiner.refinement.learned_pipeline import flag_runs
+from refiner.refinement import learned_pipeline
+from refiner.refinement.learned_pipeline import NOISE_RATIO, flag_runs, noise_ratio
 from refiner.refinement.pipeline import Refiner
 
 SHIPPED_TRAIN = Refiner.pretrained.__globals__["_WEIGHTS"] / "humanact12-train"
@@ -108,6 +109,31 @@ def test_flag_runs_and_windows():
 
 
 @pytest.mark.real_data
+def test_noise_gate_repairs_local_jitter_only(humanact12, rng):
+    clip = humanact12[20].joints.astype(np.float64)
+    local = clip.copy()
+    local[20:35] += rng.normal(0, 0.01, local[20:35].shape)  # 1 cm jitter in one window
+    assert noise_ratio(local, 20, 35) > NOISE_RATIO + 0.3
+    everywhere = clip + rng.normal(0, 0.01, clip.shape)  # as rough everywhere: the clip's texture
+    assert noise_ratio(everywhere, 20, 35) < NOISE_RATIO
+    assert noise_ratio(clip, 0, len(clip)) < NOISE_RATIO  # a whole clean clip against itself
+
+
+@pytest.mark.real_data
+def test_rigid_skeleton_batch_matches_clip_by_clip(humanact12, rng):
+    clips = np.stack([humanact12[i].joints[:40] for i in (3, 20, 41)]).astype(np.float64)
+    lengths = joint_bone_lengths(clips, "humanact12")
+    clips[1] = with_bone_lengths(clips[1], lengths[1] * rng.uniform(0.9, 1.1, size=lengths[1].shape), "humanact12")
+    batch, variation = rigid_skeleton(clips, "humanact12", 0.005)
+    assert variation.shape == (3,) and variation[1] > 0.03 and variation[[0, 2]].max() < 1e-4
+    for k in range(3):
+        single, v = rigid_skeleton(clips[k], "humanact12", 0.005)
+        np.testing.assert_allclose(batch[k], single, atol=1e-12)
+        assert v == pytest.approx(variation[k])
+    np.testing.assert_array_equal(batch[[0, 2]], clips[[0, 2]])  # rigid clips of a batch are left exactly alone
+
+
+@pytest.mark.real_data
 def test_rigid_skeleton_restores_stretched_bones(humanact12, rng):
     clip = humanact12[20].joints.astype(np.float64)
     lengths = joint_bone_lengths(clip, "humanact12")
@@ -123,8 +149,11 @@ def test_rigid_skeleton_restores_stretched_bones(humanact12, rng):
 
 
 @pytest.mark.real_data
-def test_learned_refiner_does_no_harm_and_reports(tiny_learned, humanact12):
+def test_learned_refiner_does_no_harm_and_reports(tiny_learned, humanact12, monkeypatch):
     refiner, out = tiny_learned
+    # every frame flagged makes one run no noisier than its own clip, which the noise gate keeps
+    # (tested on its own in test_noise_gate_repairs_local_jitter_only); here the repair must run
+    monkeypatch.setattr(learned_pipeline, "NOISE_RATIO", 0.0)
     forced = Refiner.load(out, detect="classifier+recognizer+correction")
     forced.flaw_recognizer.threshold_ = forced.flaw_classifier.threshold_ = 1e-6  # flag every frame
     clip = humanact12[700]

@@ -5,7 +5,8 @@ import pytest
 from refiner.core.contact import planted_feet, planted_slip
 from refiner.evaluation.flaws import foot_sliding, frozen_transition, transition_jitter
 from refiner.refinement.pipeline import splice
-from refiner.refinement.repair_candidates import (CANDIDATES, planted_feet_run, smooth_run, spline_run, stall_retime_run)
+from refiner.refinement.repair_candidates import (CANDIDATES, planted_feet_run, smooth_run, spline_run, stall_retime_run,
+                                                 stall_window)
 from refiner.core.skeletons import get_skeleton
 
 SKEL = get_skeleton("humanact12")
@@ -76,6 +77,22 @@ def test_stall_retime_fixes_stalls_and_leaves_moving_runs(walks):
 
 
 @pytest.mark.real_data
+def test_stall_window_reaches_over_the_stall_and_the_rush(walks):
+    flawed_growth, clean_growth, covered = [], [], []
+    for i, m in enumerate(walks):
+        c = frozen_transition(m, 3, random_state=i)
+        lo, hi = _runs(c.mask)[0]
+        start = lo + (hi - lo) // 3  # a detector that saw only part of the stall
+        a, b = stall_window(c.motion.joints, start, start + 2)
+        assert start - 12 <= a <= start and start + 2 <= b <= start + 14  # at most `reach` frames more each side
+        flawed_growth.append(b - a - 2)
+        covered.append(np.isin(np.arange(lo, hi), np.arange(a, b)).mean())
+        a, b = stall_window(m.joints, start, start + 2)
+        clean_growth.append(b - a - 2)
+    assert np.mean(covered) > 0.4 and np.mean(flawed_growth) > 2 * np.mean(clean_growth) + 2
+
+
+@pytest.mark.real_data
 def test_smoothing_repairs_remove_jitter(walks):
     for fn in (smooth_run, spline_run):
         before, after = [], []
@@ -106,18 +123,42 @@ class _Judge:
 
 
 @pytest.mark.parametrize("sign, expected", [(1.0, "keep"), (-1.0, "smooth")])
-def test_verified_typed_repair_is_kept_only_when_it_looks_more_real(rng, sign, expected):
+def test_verified_typed_repair_is_kept_only_when_it_looks_more_real(rng, sign, expected, monkeypatch):
     from types import SimpleNamespace
 
     import refiner.refinement.learned_pipeline as lp
+
+    monkeypatch.setattr(lp, "VERIFY_TYPED", ("noise",))  # the mechanism, on the repair that is simplest to judge
+    monkeypatch.setattr(lp, "NOISE_RATIO", 0.0)
 
     y = (np.cumsum(rng.normal(0, 0.01, (40, 24, 3)), 0) + rng.normal(0, 0.01, (40, 24, 3))).astype(np.float32)
     groups = np.zeros((40, 4))
     groups[:, list(lp.TYPED_REPAIRS).index("noise")] = 0.9
     refiner = SimpleNamespace(repair="typed", blend=4, change_penalty=0.0, flaw_classifier=_Judge(y, sign),
                               skeleton="humanact12")
-    assert "noise" in lp.VERIFY_TYPED and lp.TYPED_REPAIRS["noise"][0] == "smooth"
+    assert lp.TYPED_REPAIRS["noise"][0] == "smooth"
     name, (lo, hi), out, note = lp._repair_run(refiner, y, 10, 20, {}, groups, y, SKEL)
     assert name == expected and (lo, hi) == (10, 20)
     assert np.array_equal(out, y) == (expected == "keep")
     assert np.array_equal(out[:9], y[:9]) and np.array_equal(out[21:], y[21:])
+
+
+@pytest.mark.parametrize("local, expected", [(True, "smooth"), (False, "keep")])
+def test_noise_runs_are_smoothed_where_noisier_than_their_clip(rng, local, expected):
+    from types import SimpleNamespace
+
+    import refiner.refinement.learned_pipeline as lp
+
+    y = np.cumsum(rng.normal(0, 0.01, (40, 24, 3)), 0)
+    noisy = slice(10, 20) if local else slice(None)
+    y[noisy] += rng.normal(0, 0.01, y[noisy].shape)
+    y = y.astype(np.float32)
+    groups = np.zeros((40, 4))
+    groups[:, list(lp.TYPED_REPAIRS).index("noise")] = 0.9
+    # a judge that finds any change less real: noise is not verified by the flaw classifier (it cannot
+    # tell a smoothed run from a noisy one), only gated by how much noisier the run is than its clip
+    refiner = SimpleNamespace(repair="typed", blend=4, change_penalty=0.0, flaw_classifier=_Judge(y, 1.0),
+                              skeleton="humanact12")
+    name, _, out, note = lp._repair_run(refiner, y, 10, 20, {}, groups, y, SKEL)
+    assert name == expected and np.array_equal(out, y) == (expected == "keep")
+    assert expected == "smooth" or "no noisier than the rest of the clip" in note

@@ -76,3 +76,20 @@ def test_bad_input_is_refused(rng):
         synthesize(np.zeros((20, 24, 3)), rng, kinds=["reverse"])
     clean = synthesize(np.ones((20, 24, 3)), rng, clean_probability=1.0)
     assert clean.kinds == () and not clean.touched.any()
+
+
+@pytest.mark.real_data
+def test_flaw_batches_can_put_flawed_crops_on_rigid_bones(humanact12):
+    from refiner.evaluation.physics import bone_length_variation
+    from refiner.refinement.flaw_training import FlawBatches
+
+    clips = [m.joints for m in humanact12.motions[:40]]
+    kinds = ["bone_stretch", "white_noise"]
+    raw = FlawBatches(clips, None, None, lengths=(48, 48), kinds=kinds, n_actions=1).sample(np.arange(16), np.random.default_rng(0))
+    rigid = FlawBatches(clips, None, None, lengths=(48, 48), kinds=kinds, n_actions=1,
+                        rigid_tolerance=0.005).sample(np.arange(16), np.random.default_rng(0))
+    np.testing.assert_array_equal(raw["clean"].numpy(), rigid["clean"].numpy())  # same crops, same flaws
+    full = rigid["valid"].numpy().all(1)
+    var_raw = [bone_length_variation(x) for x in raw["flawed"].numpy()[full]]
+    var_rigid = [bone_length_variation(x) for x in rigid["flawed"].numpy()[full]]
+    assert max(var_raw) > 0.02 and max(var_rigid) < 0.01

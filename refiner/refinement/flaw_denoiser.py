@@ -94,6 +94,9 @@ class FlawDenoiser(NetworkComponent):
         Training flaw mechanisms (:data:`refiner.refinement.training_flaws.MECHANISMS`).
     velocity_weight : float, default=1.0
         Weight of the velocity error beside the position error (both on suspect frames, metres).
+    rigid_tolerance : float or None, default=0.005
+        Training crops whose bones vary more than this are put on rigid bones after their flaws, as
+        the refiner shows clips to its repairs (None: raw flawed crops, as before this parameter).
     schedule : TrainSchedule, default=TrainSchedule(n_epochs=60, batch_size=64, learning_rate=1e-3, patience=60, steps_per_epoch=100)
         6,000 steps: about 20 minutes on one CPU core.
     random_state : int or None, default=0
@@ -111,7 +114,7 @@ class FlawDenoiser(NetworkComponent):
     _fitted_attributes = ("skeleton_", "n_joints_", "threshold_", "history_")
 
     def __init__(self, *, hidden: int = 128, n_layers: int = 6, kernel: int = 5, window: int = 64,
-                 kinds: tuple = DENOISE_KINDS, velocity_weight: float = 1.0,
+                 kinds: tuple = DENOISE_KINDS, velocity_weight: float = 1.0, rigid_tolerance: float | None = 0.005,
                  schedule: TrainSchedule = TrainSchedule(n_epochs=60, batch_size=64, learning_rate=1e-3, patience=60,
                                                          steps_per_epoch=100),
                  random_state: int | None = 0):
@@ -121,6 +124,7 @@ class FlawDenoiser(NetworkComponent):
         self.window = window
         self.kinds = kinds
         self.velocity_weight = velocity_weight
+        self.rigid_tolerance = rigid_tolerance
         self.schedule = schedule
         self.random_state = random_state
 
@@ -138,10 +142,12 @@ class FlawDenoiser(NetworkComponent):
         schedule = self._schedule()
         device = resolve_device(schedule.device)
         batches = FlawBatches(clips, None, None, skeleton=self.skeleton_, lengths=(32, self.window),
-                              kinds=list(self.kinds), hide_probability=0.0, n_actions=1)
+                              kinds=list(self.kinds), hide_probability=0.0, n_actions=1,
+                              rigid_tolerance=self.rigid_tolerance)
         held = clips if validation is None else [np.asarray(c, np.float32) for c in validation]
         val = FlawBatches(held, None, None, skeleton=self.skeleton_, lengths=(self.window, self.window),
-                          kinds=list(self.kinds), hide_probability=0.0, n_actions=1)
+                          kinds=list(self.kinds), hide_probability=0.0, n_actions=1,
+                          rigid_tolerance=self.rigid_tolerance)
         with seeded(rng):
             self.network_ = self._make_network({"skeleton_": self.skeleton_, "n_joints_": self.n_joints_})
             stats = batches.sample(rng.choice(len(batches), size=min(256, len(batches))), np.random.default_rng(1))

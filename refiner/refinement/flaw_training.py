@@ -16,6 +16,7 @@ import torch
 from scipy.ndimage import binary_dilation
 
 from refiner.core.signal import linear_infill
+from refiner.core.skeletons import rigid_skeleton
 from refiner.nn.training import crop_start, put_crop, to_device
 from refiner.refinement.anchor_recognition import anchor_targets
 from refiner.refinement.training_flaws import synthesize
@@ -44,11 +45,16 @@ class FlawBatches:
     kinds : sequence of str, optional
         Flaw mechanisms (default all of ``refiner.refinement.training_flaws.MECHANISMS``).
     hide_probability, drop_action_probability : float
+    rigid_tolerance : float or None
+        Flawed crops whose bones vary more than this are put on rigid bones after their flaws
+        (:func:`refiner.core.skeletons.rigid_skeleton`), as the refiner shows clips to its steps; the labels
+        are what is left of the flaw (None: raw flawed crops).
     """
 
     def __init__(self, clips: Sequence[np.ndarray], actions, anchors, *, skeleton: str = "humanact12",
                  lengths: tuple[int, int] = (32, 64), kinds=None, hide_probability: float = 0.3,
-                 drop_action_probability: float = 0.2, n_actions: int | None = None):
+                 drop_action_probability: float = 0.2, n_actions: int | None = None,
+                 rigid_tolerance: float | None = None):
         self.clips = [np.asarray(c, dtype=np.float32) for c in clips]
         self.actions = np.zeros(len(self.clips), np.int64) if actions is None else np.asarray(actions, dtype=np.int64)
         self.targets = [np.zeros(len(c), np.float32) if anchors is None else anchor_targets(len(c), a).astype(np.float32)
@@ -59,6 +65,7 @@ class FlawBatches:
         self.hide_probability = hide_probability
         self.drop_action_probability = drop_action_probability
         self.n_actions = int(self.actions.max()) + 1 if n_actions is None else int(n_actions)
+        self.rigid_tolerance = rigid_tolerance
 
     def __len__(self) -> int:
         return len(self.clips)
@@ -80,15 +87,21 @@ class FlawBatches:
         out["anchor_target"] = np.zeros((n, length), np.float32)
         out["action"] = np.zeros(n, np.int64)
         out["true_action"] = self.actions[np.asarray(indices)]
-        for b, i in enumerate(indices):
+        crops, flaws = [], []
+        for i in indices:
             clip = self.clips[i]
             start = crop_start(len(clip), length, rng)
             crop = clip[start : start + length]
-            crop = crop - crop[:1, :1]
-            m = len(crop)
+            crops.append((crop - crop[:1, :1], start))
             donor = self.clips[int(rng.integers(len(self.clips)))]
-            flaw = synthesize(crop, rng, skeleton=self.skeleton, kinds=self.kinds, donors=[donor]) if m >= 8 else None
-            flawed = crop if flaw is None else flaw.joints
+            flaws.append(synthesize(crops[-1][0], rng, skeleton=self.skeleton, kinds=self.kinds, donors=[donor])
+                         if len(crop) >= 8 else None)
+        flawed_all = [c if f is None else f.joints for (c, _), f in zip(crops, flaws)]
+        if self.rigid_tolerance is not None:
+            flawed_all = self._rigid(flawed_all, length)
+        for b, i in enumerate(indices):
+            (crop, start), flaw, flawed = crops[b], flaws[b], flawed_all[b]
+            m = len(crop)
             touched = np.zeros(m, bool) if flaw is None else flaw.touched
             disp_cm = 100 * np.linalg.norm(flawed - crop, axis=-1).mean(-1)
             suspect = self._suspect(touched & (disp_cm > IGNORE_BELOW_CM), rng)
@@ -106,6 +119,19 @@ class FlawBatches:
             drop = rng.random() < self.drop_action_probability
             out["action"][b] = self.n_actions if drop else self.actions[i]
         return to_device(out, device)
+
+    def _rigid(self, flawed: list, length: int) -> list:
+        """The flawed crops on rigid bones: the full-length ones in one batched projection."""
+        full = [k for k, f in enumerate(flawed) if len(f) == length]
+        out = list(flawed)
+        if full:
+            rigid, _ = rigid_skeleton(np.stack([flawed[k] for k in full]), self.skeleton, self.rigid_tolerance)
+            for k, r in zip(full, rigid):
+                out[k] = r.astype(np.float32)
+        for k, f in enumerate(flawed):
+            if len(f) != length and len(f) >= 2:
+                out[k] = rigid_skeleton(f, self.skeleton, self.rigid_tolerance)[0].astype(np.float32)
+        return out
 
     @staticmethod
     def _suspect(flawed: np.ndarray, rng) -> np.ndarray:

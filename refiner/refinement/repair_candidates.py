@@ -28,7 +28,7 @@ from refiner.concepts.transitions import arc_length_profile
 from refiner.core.contact import planted_slip
 from refiner.core.skeletons import Skeleton
 
-__all__ = ["retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
+__all__ = ["stall_window", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
            "CANDIDATES"]
 
 
@@ -83,6 +83,21 @@ def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall:
     still = speed[max(lo - 1, 0) : hi] < stall * max(float(np.median(speed)), 1e-9)
     run = np.convolve(still.astype(int), np.ones(min_frames, int), mode="valid")
     return retime_run(y, lo, hi, skeleton) if run.size and run.max() >= min_frames else y.copy()
+
+
+def stall_window(y: np.ndarray, lo: int, hi: int, *, stall: float = 0.1, rush: float = 1.5, reach: int = 12
+                 ) -> tuple[int, int]:
+    """``[lo, hi)`` grown over the stall before it (mean joint speed under ``stall`` of the clip's median)
+    and the rush after it (over ``rush`` times the median), by at most ``reach`` frames each side: a
+    stalled transition must be re-timed from where it stops to where it has caught up."""
+    speed = np.linalg.norm(np.diff(y, axis=0), axis=-1).mean(-1)  # speed[t]: frame t -> t + 1
+    median = max(float(np.median(speed)), 1e-9)
+    a, c = lo, hi
+    while a > max(lo - reach, 1) and speed[a - 1] < stall * median:
+        a -= 1
+    while c < min(hi + reach, len(y) - 1) and speed[c - 1] > rush * median:
+        c += 1
+    return a, c
 
 
 def forward_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton) -> np.ndarray:
