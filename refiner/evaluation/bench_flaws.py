@@ -6,8 +6,9 @@ that a refiner removes, ``100 * (1 - MPJPE(refined) / MPJPE(flawed))`` against t
 per family, with the families whose mechanism training never used
 (:data:`refiner.refinement.training_flaws.HELD_OUT_FAMILIES`) reported apart. The *oracle* rows isolate the
 repair step: they are given the true flaw mask and replace exactly those frames, by linear
-interpolation, by the repair network in-filling them (frames hidden), by the repair network
-seeing them (frames given), or by the flaw denoiser correcting them (when the weights have one).
+interpolation, by the repair network in-filling them (frames hidden), by the motion in-filler (when
+the weights have one), by the repair network seeing them (frames given), or by the flaw denoiser
+correcting them (when the weights have one).
 
 The record (``flaws.json``): ``clips``, ``severities``, ``families``, ``held_out_families``, the refiners
 ``skipped`` (name -> why), ``clean`` (name -> ``mpjpe_change_cm``, ``share_changed``), ``flawed`` (the
@@ -29,7 +30,9 @@ from refiner.refinement.training_flaws import HELD_OUT_FAMILIES
 
 __all__ = ["bench_flaws", "flaw_records", "ORACLES"]
 
-ORACLES = ("oracle_linear", "oracle_infill", "oracle_given", "oracle_denoise")
+ORACLES = ("oracle_linear", "oracle_infill", "oracle_motion_infill", "oracle_given", "oracle_denoise")
+#: Oracle rows that need an optional part of the weights.
+_ORACLE_PARTS = {"oracle_denoise": "flaw_denoiser", "oracle_motion_infill": "motion_infiller"}
 
 
 def _oracle(name: str, model, flawed: np.ndarray, mask: np.ndarray, action: int) -> np.ndarray:
@@ -40,6 +43,8 @@ def _oracle(name: str, model, flawed: np.ndarray, mask: np.ndarray, action: int)
         proposal = linear_infill(flawed, mask)
     elif name == "oracle_denoise":
         proposal = model.flaw_denoiser.denoise(flawed[None], mask[None])[0]
+    elif name == "oracle_motion_infill":
+        proposal = model.motion_infiller.infill(flawed[None], mask[None])[0]
     else:
         proposal = model.flaw_repairer.repair(flawed[None], mask[None], [action], hide=name == "oracle_infill")[0]
     out = flawed.copy()
@@ -69,7 +74,7 @@ def flaw_records(clips, refiners: dict, *, severities=(2,), model=None, families
             flawed = [corrupt(m, family, severity, random_state=i, segmentation=segs[i], donors=donors[i])
                       for i, m in enumerate(clips)]
             base = None
-            oracles = [o for o in ORACLES if o != "oracle_denoise" or getattr(model, "flaw_denoiser", None) is not None]
+            oracles = [o for o in ORACLES if getattr(model, _ORACLE_PARTS.get(o, ""), True) is not None]
             names = list(refiners) + (oracles if model is not None else [])
             for name in names:
                 if name in ORACLES:

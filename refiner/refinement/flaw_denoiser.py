@@ -28,7 +28,8 @@ from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.training import TrainSchedule, fit_network, resolve_device, seeded
 from refiner.refinement.flaw_training import FlawBatches
 
-__all__ = ["FlawDenoiser", "FlawDenoiserNet", "denoiser_features", "DENOISE_KINDS"]
+__all__ = ["FlawDenoiser", "FlawDenoiserNet", "denoiser_features", "corrected_frames_loss", "checked_batch",
+           "DENOISE_KINDS"]
 
 #: Training mechanisms by default: the small flaws a correction of the given frames can undo (noise,
 #: drifting or offset joints, stretched bones); a wrong pose or a stall needs the context instead, and
@@ -52,6 +53,33 @@ def denoiser_features(x: torch.Tensor, suspect: torch.Tensor, root: int = 0) -> 
     return torch.cat([flat[0], r[:, :, 0] - r[:, :1, 0], flat[1], flat[2], suspect[..., None].float()], -1)
 
 
+def corrected_frames_loss(pred: torch.Tensor, clean: torch.Tensor, frames: torch.Tensor, valid: torch.Tensor,
+                          velocity_weight: float) -> torch.Tensor:
+    """Mean joint error (metres) of ``pred`` against ``clean`` (both ``(B, T, J, 3)``) on the ``frames (B, T)``
+    the network corrects, plus ``velocity_weight`` times the velocity error on the steps that touch them;
+    ``valid (B, T)`` marks real (not padded) frames."""
+    w = (valid & frames).float()
+    err = torch.linalg.vector_norm(pred - clean, dim=-1).mean(-1)
+    loss = (err * w).sum() / w.sum().clamp_min(1.0)
+    vel = torch.linalg.vector_norm(torch.diff(pred, dim=1) - torch.diff(clean, dim=1), dim=-1).mean(-1)
+    vw = (w[:, 1:] + w[:, :-1]).clamp_max(1.0) * (valid[:, 1:] & valid[:, :-1]).float()
+    return loss + velocity_weight * (vel * vw).sum() / vw.sum().clamp_min(1.0)
+
+
+def checked_batch(joints, mask, n_joints: int, mask_name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of ``joints (B, T, J, 3)`` as float32 and ``mask (B, T)`` as bool, or a ``ValueError`` naming
+    what is wrong (shapes, NaN / Inf)."""
+    given = np.array(joints, np.float32, copy=True)
+    mask = np.array(mask, bool, copy=True)
+    if given.ndim != 4 or given.shape[2:] != (n_joints, 3):
+        raise ValueError(f"`joints` must be (B, T, {n_joints}, 3); got shape {given.shape}.")
+    if mask.shape != given.shape[:2]:
+        raise ValueError(f"`{mask_name}` must be (B, T) = {given.shape[:2]}; got shape {mask.shape}.")
+    if not np.isfinite(given).all():
+        raise ValueError("`joints` must be finite; got NaN or Inf.")
+    return given, mask
+
+
 class FlawDenoiserNet(nn.Module):
     """``x (B, T, J, 3)`` metres, ``suspect (B, T)`` bool -> corrected ``(B, T, J, 3)``: the given frames
     plus a learned correction on the suspect ones (zero at initialisation: an untrained network is the
@@ -72,6 +100,13 @@ class FlawDenoiserNet(nn.Module):
         self.out = nn.Conv1d(hidden, 3 * n_joints, 1)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
+
+    @torch.no_grad()
+    def standardise(self, x: torch.Tensor, suspect: torch.Tensor, valid: torch.Tensor) -> None:
+        """Set ``mean`` and ``scale`` from a batch of inputs ``x (B, T, J, 3)``, ``suspect`` and ``valid (B, T)``."""
+        feats = denoiser_features(x, suspect, self.root)[valid]
+        self.mean.copy_(feats.mean(0))
+        self.scale.copy_(feats.std(0).clamp_min(1e-3))
 
     def forward(self, x: torch.Tensor, suspect: torch.Tensor) -> torch.Tensor:
         feats = (denoiser_features(x, suspect, self.root) - self.mean) / self.scale
@@ -151,9 +186,7 @@ class FlawDenoiser(NetworkComponent):
         with seeded(rng):
             self.network_ = self._make_network({"skeleton_": self.skeleton_, "n_joints_": self.n_joints_})
             stats = batches.sample(rng.choice(len(batches), size=min(256, len(batches))), np.random.default_rng(1))
-            feats = denoiser_features(stats["flawed"], stats["suspect"], self.network_.root)[stats["valid"]]
-            self.network_.mean.copy_(feats.mean(0))
-            self.network_.scale.copy_(feats.std(0).clamp_min(1e-3))
+            self.network_.standardise(stats["flawed"], stats["suspect"], stats["valid"])
             self.network_.to(device)
             self.history_ = fit_network(self.network_, self._loss, lambda idx, r: batches.sample(idx, r, device),
                                         len(batches), val.validation_batch(device), schedule, rng,
@@ -162,27 +195,15 @@ class FlawDenoiser(NetworkComponent):
         return self
 
     def _loss(self, net, batch, rng) -> torch.Tensor:
-        pred, clean = net(batch["flawed"], batch["suspect"]), batch["clean"]
-        w = (batch["valid"] & batch["suspect"]).float()
-        err = torch.linalg.vector_norm(pred - clean, dim=-1).mean(-1)
-        loss = (err * w).sum() / w.sum().clamp_min(1.0)
-        vel = torch.linalg.vector_norm(torch.diff(pred, dim=1) - torch.diff(clean, dim=1), dim=-1).mean(-1)
-        vw = w[:, 1:] * batch["valid"][:, :-1].float()
-        return loss + self.velocity_weight * (vel * vw).sum() / vw.sum().clamp_min(1.0)
+        pred = net(batch["flawed"], batch["suspect"])
+        return corrected_frames_loss(pred, batch["clean"], batch["suspect"], batch["valid"], self.velocity_weight)
 
     @torch.no_grad()
     def denoise(self, joints: np.ndarray, suspect: np.ndarray) -> np.ndarray:
         """Corrected joints ``(B, T, J, 3)`` float32 for a batch ``(B, T, J, 3)`` metres and ``suspect (B, T)``
         bool, in one forward pass; frames not suspect come back unchanged."""
         check_is_fitted(self, "network_", msg=NOT_FITTED)
-        given = np.array(joints, np.float32, copy=True)
-        mask = np.array(suspect, bool, copy=True)
-        if given.ndim != 4 or given.shape[2:] != (self.n_joints_, 3):
-            raise ValueError(f"`joints` must be (B, T, {self.n_joints_}, 3); got shape {given.shape}.")
-        if mask.shape != given.shape[:2]:
-            raise ValueError(f"`suspect` must be (B, T) = {given.shape[:2]}; got shape {mask.shape}.")
-        if not np.isfinite(given).all():
-            raise ValueError("`joints` must be finite; got NaN or Inf.")
+        given, mask = checked_batch(joints, suspect, self.n_joints_, "suspect")
         out = self.network_(torch.from_numpy(given).to(self.device_), torch.from_numpy(mask).to(self.device_))
         out = out.cpu().numpy()
         out[~mask] = given[~mask]

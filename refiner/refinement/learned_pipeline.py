@@ -77,6 +77,18 @@ _GROUP_NAMES = tuple(GROUPS)
 #:   (``detect="classifier+denoiser"``, threshold 2.6 cm at 3 % of clean clips) flagged no more drift
 #:   (-0.9 %); pose -> ``denoise+planted_feet`` verified: foot_sliding 0.0 %, mean +8.2 %; unverified with
 #:   that detector: anchor_drift -6.6 %, mean +12.1 %. So the denoiser stays an option, not the default.
+#: - noise verified by the classifier repaired nothing: it found every smoothed run of the jittered clips
+#:   *less* real than the noisy one (68 runs; mean flaw probability 0.62 -> 0.76, error 0.96 -> 0.68 cm), so
+#:   noise runs are smoothed unverified where they are :data:`NOISE_RATIO` times noisier than their clip
+#:   (jitter +17.7 -> +22.7 %; the a2m reference generator's FID 4.285 -> 4.286 on 600 samples, 5 % of its
+#:   frames smoothed). A learned judge instead (a temporal convolution trained to estimate each frame's true
+#:   error after random flaws and random hand-written repairs, 3.5 min) verified noise as well (+21.6 %) but
+#:   refused good re-timings (frozen +30.9 %) and, choosing among all candidates, made time_warp -8.9 %;
+#: - the stall re-timing's window grown over the stall before it and the rush after it
+#:   (:func:`~refiner.refinement.repair_candidates.stall_window`, widened by 2): frozen +42.7 -> +58.9 %
+#:   (widened by 0 / 2 / 4 / 6: 57.3 / 58.9 / 50.6 / 44.5 %; rush 1.2 / 1.5 / 2 times the median speed:
+#:   48.6 / 50.6 / 49.6 % at widening 4); growing to the recognised anchors or to the flawed clip's own
+#:   segmentation anchors instead: 42.6 / 40.4 %; **+16.6 %** in all.
 TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet", 0), "pose": ("planted_feet", 0),
                  "noise": ("smooth", 0)}
 #: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
@@ -106,7 +118,7 @@ def check_detect(detect: str) -> str:
 
 #: The hand-written repair that stands in for a network's proposal when the weights lack that network
 #: (weights trained before the denoiser existed smooth noise instead).
-STAND_INS = {"denoise": "smooth"}
+STAND_INS = {"denoise": "smooth", "motion_infill": "network_infill"}
 _ANCHOR_THRESHOLD = 0.3
 #: Frames on each side of a run that the selection's flaw score also covers (the seams).
 _SCORE_CONTEXT = 4
@@ -153,6 +165,7 @@ _HOW = {
     "network": "corrected from the given frames and context by the repair network",
     "network_infill": "in-filled from the context by the repair network",
     "denoise": "corrected from the given frames by the denoising network",
+    "motion_infill": "in-filled from the context by the motion in-filler",
     "retime": "re-timed along its own path with a smooth speed",
     "stall_retime": "re-timed along its own path with a smooth speed where it stalls",
     "forward_retime": "replayed forward only along its progress to the next kept pose",
@@ -320,10 +333,13 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
         typed = {p for name, _ in TYPED_REPAIRS.values() for p in name.split("+")} if refiner.repair == "typed" else set()
         if refiner.repair in ("given", "select") or "network" in typed:
             proposals["network"] = refiner.flaw_repairer.repair(clips[todo], suspect[todo], acts)
-        if refiner.repair in ("infill", "select") or "network_infill" in typed:
+        stand_in = "motion_infill" in typed and refiner.motion_infiller is None
+        if refiner.repair in ("infill", "select") or "network_infill" in typed or stand_in:
             proposals["network_infill"] = refiner.flaw_repairer.repair(clips[todo], suspect[todo], acts, hide=True)
         if "denoise" in typed and refiner.flaw_denoiser is not None:
             proposals["denoise"] = refiner.flaw_denoiser.denoise(clips[todo], suspect[todo])
+        if "motion_infill" in typed and refiner.motion_infiller is not None:
+            proposals["motion_infill"] = refiner.motion_infiller.infill(clips[todo], suspect[todo])
         skel = get_skeleton(refiner.skeleton)
         for k, b in enumerate(todo):
             y, changed = clips[b].copy(), np.zeros(len(clips[b]), bool)

@@ -31,6 +31,7 @@ from refiner.refinement.anchor_refinement import AnchorRefiner
 from refiner.refinement.converted_refinement import ConvertedRefiner
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
+from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.inputs import MODES, auto_threads, check_choice, check_metres, check_metres_each, check_threads, thread_limits
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.report import RefinementReport
@@ -51,6 +52,7 @@ _PARTS = {
     "flaw_repairer": FlawRepairer,
     "flaw_classifier": FlawClassifier,
     "flaw_denoiser": FlawDenoiser,
+    "motion_infiller": MotionInfiller,
 }
 _NO_DEVICE = ("anchor_concepts", "anchor_quality")
 #: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
@@ -71,9 +73,10 @@ class Refiner:
         :class:`TransitionRefiner`, :class:`AnchorConcepts`.
     anchor_quality : AnchorQuality, optional
         Needed for ``quality="pose"`` and ``anchor_method="posterior"``.
-    flaw_recognizer, flaw_repairer, flaw_classifier, flaw_denoiser : optional
+    flaw_recognizer, flaw_repairer, flaw_classifier, flaw_denoiser, motion_infiller : optional
         The learned steps (:class:`FlawRecognizer`, :class:`FlawRepairer`, :class:`FlawClassifier`,
-        :class:`FlawDenoiser`; without the denoiser, noise is smoothed instead).
+        :class:`FlawDenoiser`, :class:`MotionInfiller`; without the denoiser, noise is smoothed instead;
+        without the in-filler, the repair network's in-fill stands in).
     skeleton : str, default="humanact12"
     action_names : sequence of str
     mode : {"full", "anchor", "transition"}, default="full"
@@ -112,7 +115,7 @@ class Refiner:
 
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
                  anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None,
-                 flaw_denoiser=None, *,
+                 flaw_denoiser=None, motion_infiller=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, change_penalty: float = 0.01, hysteresis: float = 0.5,
@@ -121,7 +124,7 @@ class Refiner:
         self.recognizer, self.anchor_refiner, self.anchor_concepts = recognizer, anchor_refiner, anchor_concepts
         self.transition_generator, self.transition_refiner = transition_generator, transition_refiner
         self.flaw_recognizer, self.flaw_repairer, self.flaw_classifier = flaw_recognizer, flaw_repairer, flaw_classifier
-        self.flaw_denoiser = flaw_denoiser
+        self.flaw_denoiser, self.motion_infiller = flaw_denoiser, motion_infiller
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
         if self.method == "learned" and not learned:

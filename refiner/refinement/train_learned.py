@@ -18,6 +18,7 @@ from refiner.concepts.segmentation import segment
 from refiner.io.datasets import MotionDataset
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
+from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
 
@@ -42,14 +43,17 @@ CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
 #: The flaw denoiser's settings (about 20 minutes on one CPU core) and its tiny test version.
 DENOISER_CONFIGS = {"default": dict(schedule=dict()),
                     "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
+#: The motion in-filler's settings (about 40 minutes on one CPU core) and its tiny test version.
+INFILLER_CONFIGS = {"default": dict(schedule=dict()),
+                    "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer")
-#: Parts trained only when asked (``only=``): the denoiser is an option of the refiner, not a default
-#: step (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
-#: it is calibrated and installed with the others.
-OPTIONAL_PARTS = ("flaw_denoiser",)
+#: Parts trained only when asked (``only=``): the denoiser and the motion in-filler serve options of the
+#: refiner (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
+#: they are calibrated and installed with the others.
+OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller")
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
-            "flaw_denoiser": FlawDenoiser}
-_CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": DENOISER_CONFIGS}
+            "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller}
+_CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": DENOISER_CONFIGS, "motion_infiller": INFILLER_CONFIGS}
 
 
 def calibration_split(subjects) -> np.ndarray:
@@ -103,7 +107,7 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         cfg = dict(_CONFIGS.get(name, LEARNED_CONFIGS)[config])
         schedule = replace(cls().schedule, **cfg.pop("schedule"), **run)
         est = cls(**cfg, schedule=schedule, random_state=random_state)
-        if name in ("flaw_classifier", "flaw_denoiser"):  # action-agnostic: clips alone
+        if name in ("flaw_classifier", "flaw_denoiser", "motion_infiller"):  # action-agnostic: clips alone
             est.fit(pick(fit_idx)[0], skeleton=skeleton, validation=pick(cal_idx)[0],
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         elif name == "flaw_recognizer":
@@ -136,6 +140,7 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.flaw_recognizer = parts["flaw_recognizer"]
     refiner.flaw_repairer = parts["flaw_repairer"]
     refiner.flaw_denoiser = parts.get("flaw_denoiser")
+    refiner.motion_infiller = parts.get("motion_infiller")
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
                                    "classifier_threshold": float(parts["flaw_classifier"].threshold_),
                                    "correction_threshold_m": float(parts["flaw_repairer"].correction_threshold_),
