@@ -139,12 +139,12 @@ class MotionInfiller(NetworkComponent):
 
     @torch.no_grad()
     def infill(self, joints: np.ndarray, gap: np.ndarray) -> np.ndarray:
-        """Joints ``(B, T, J, 3)`` float32 with the ``gap (B, T)`` frames in-filled from the others (each clip
-        needs a kept frame); frames outside the gaps come back unchanged. One forward pass for the batch."""
+        """Joints ``(B, T, J, 3)`` float32 with the ``gap (B, T)`` frames in-filled from the others; frames
+        outside the gaps come back unchanged, and so does a clip with no frame outside its gap (nothing to
+        in-fill from, as :func:`~refiner.core.signal.linear_infill`). One forward pass for the batch."""
         check_is_fitted(self, "network_", msg=NOT_FITTED)
         given, mask = checked_batch(joints, gap, self.n_joints_, "gap")
-        if mask.all(1).any():
-            raise ValueError("every clip needs at least one frame outside its gap to in-fill from.")
+        mask[mask.all(1)] = False
         lin = np.stack([linear_infill(c, g) if g.any() else c for c, g in zip(given, mask)])
         out = self.network_(torch.from_numpy(lin).to(self.device_), torch.from_numpy(mask).to(self.device_))
         out = out.cpu().numpy()
