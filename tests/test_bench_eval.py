@@ -28,8 +28,9 @@ def test_flaw_records_on_a_few_clips(humanact12):
                                   model=model, families=["transition_jitter", "frozen_transition", "foot_sliding"])
     assert clean[0][:3] == ["identity", 0.0, 0.0] and clean[1][1] > 0.0 and clean[1][2] == 1.0
     by = {(r["family"], r["refiner"]): r for r in records}
-    assert model.flaw_denoiser is None  # the shipped weights have no denoiser: no oracle_denoise row
-    assert {r["refiner"] for r in records} == {"identity", "savgol", *ORACLES} - {"oracle_denoise"}
+    # the shipped weights have no denoiser and no motion in-filler: no rows for them
+    assert model.flaw_denoiser is None and model.motion_infiller is None
+    assert {r["refiner"] for r in records} == {"identity", "savgol", *ORACLES} - {"oracle_denoise", "oracle_motion_infill"}
     for family in ("transition_jitter", "frozen_transition", "foot_sliding"):
         ident = by[(family, "identity")]
         assert ident["mpjpe_cm"] > 0.2 and ident["removed_pct"] == 0.0
@@ -40,12 +41,14 @@ def test_flaw_records_on_a_few_clips(humanact12):
     assert by[("transition_jitter", "oracle_linear")]["removed_pct"] < -100.0
     # the repair network, shown the true frames of a glide, takes most of it back
     assert by[("foot_sliding", "oracle_given")]["removed_pct"] > 20.0
-    # with a denoiser (an option, trained here in seconds) its oracle row joins
+    # with a denoiser and an in-filler (options, trained here in seconds) their oracle rows join
     from refiner.nn.training import TrainSchedule
     from refiner.refinement.flaw_denoiser import FlawDenoiser
+    from refiner.refinement.infilling import MotionInfiller
 
-    model.flaw_denoiser = FlawDenoiser(hidden=8, n_layers=1, schedule=TrainSchedule(
-        n_epochs=1, steps_per_epoch=2, batch_size=8, device="cpu")).fit([m.joints for m in clips])
+    tiny = TrainSchedule(n_epochs=1, steps_per_epoch=2, batch_size=8, device="cpu")
+    model.flaw_denoiser = FlawDenoiser(hidden=8, n_layers=1, schedule=tiny).fit([m.joints for m in clips])
+    model.motion_infiller = MotionInfiller(hidden=8, n_layers=1, schedule=tiny).fit([m.joints for m in clips])
     _, records = flaw_records(clips[:2], {"identity": IdentityRefiner()}, model=model, families=["transition_jitter"])
     assert {r["refiner"] for r in records} == {"identity", *ORACLES}
 
@@ -61,7 +64,7 @@ def test_bench_flaws_quick(tmp_path):
     rec = bench_json("flaws", tmp_path)
     assert rec["skipped"] == {}, rec["skipped"]  # a refiner that could not be built fails the test
     assert rec["clips"] == 4 and rec["severities"] == [2] and rec["families"] == list(FLAW_FAMILIES)
-    names = [*FLAW_REFINERS, *(o for o in ORACLES if o != "oracle_denoise")]  # shipped weights: no denoiser
+    names = [*FLAW_REFINERS, *(o for o in ORACLES if o not in ("oracle_denoise", "oracle_motion_infill"))]  # not shipped
     assert list(rec["clean"]) == list(FLAW_REFINERS)
     by = {(r["family"], r["refiner"]): r for r in rec["flawed"]}
     assert len(rec["flawed"]) == len(by) == len(FLAW_FAMILIES) * len(names)

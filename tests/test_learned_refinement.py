@@ -23,8 +23,9 @@ def tiny_learned(humanact12, tmp_path_factory):
 
     pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[::15][:6]]  # many subjects
     out = tmp_path_factory.mktemp("tiny_learned")
-    assert train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN,
-                                 only="flaw_denoiser") is None  # the optional part, installed with the others
+    for optional in ("flaw_denoiser", "motion_infiller"):  # the optional parts, installed with the others
+        assert train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN,
+                                     only=optional) is None
     refiner = train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN)
     return refiner, out
 
@@ -40,12 +41,13 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert refiner.manifest["learned"]["flaw_threshold"] == pytest.approx(refiner.flaw_recognizer.threshold_)
     again = Refiner.load(out)
     assert again.flaw_denoiser is not None and again.flaw_denoiser.skeleton_ == "humanact12"
+    assert again.motion_infiller is not None and again.motion_infiller.n_joints_ == 24
     x = humanact12[10].joints[:50]
     np.testing.assert_allclose(again.flaw_recognizer.predict(x[None])["flaw"],
                                refiner.flaw_recognizer.predict(x[None])["flaw"], atol=1e-3)  # float16 weights
     before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
     parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
-    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "flaw_denoiser"}
+    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "flaw_denoiser", "motion_infiller"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
 
 
@@ -196,6 +198,7 @@ def test_denoiser_repairs_and_detects_when_asked_and_smoothing_stands_in_without
     refiner, out = tiny_learned
     monkeypatch.setattr(lp, "TYPED_REPAIRS", {g: ("denoise", 0) for g in lp.TYPED_REPAIRS})
     monkeypatch.setattr(lp, "VERIFY_TYPED", ())
+    monkeypatch.setattr(lp, "NOISE_RATIO", 0.0)  # one whole-clip run is no noisier than its clip
     clip = humanact12[700]
     model = Refiner.load(out, detect="classifier+denoiser")
     model.flaw_classifier.threshold_ = 1e-6  # flag every frame
@@ -300,3 +303,22 @@ def test_learned_steps_alone_make_a_refiner_and_the_paper_method_says_what_is_mi
     np.testing.assert_array_equal(Refiner.load(tmp_path / "alone").refine(x), alone.refine(x))
     with pytest.raises(ValueError, match="method='concepts'.*needs the parts recognizer.*learned steps only"):
         Refiner.load(tmp_path / "alone", method="concepts")
+
+
+@pytest.mark.real_data
+@pytest.mark.parametrize("with_infiller", [True, False])
+def test_typed_motion_infill_repair_and_its_stand_in(tiny_learned, humanact12, monkeypatch, with_infiller):
+    _, out = tiny_learned
+    forced = Refiner.load(out)
+    if not with_infiller:
+        forced.motion_infiller = None  # weights without it: the repair network's in-fill stands in
+    forced.flaw_classifier.threshold_ = 1e-6  # flag every frame
+    for group in learned_pipeline.TYPED_REPAIRS:
+        monkeypatch.setitem(learned_pipeline.TYPED_REPAIRS, group, ("motion_infill", 0))
+    monkeypatch.setattr(learned_pipeline, "VERIFY_TYPED", ())
+    monkeypatch.setattr(learned_pipeline, "NOISE_RATIO", 0.0)
+    clips = np.stack([humanact12[i].joints[:40] for i in (5, 60)])
+    result, reports = forced.refine(clips, return_report=True)
+    assert result.shape == clips.shape and np.isfinite(result).all()
+    names = {c.get("repair") for r in reports for c in r.changes} - {None}
+    assert names == {"motion_infill" if with_infiller else "network_infill"}, names
