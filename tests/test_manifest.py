@@ -35,7 +35,7 @@ def edit(folder: Path, change, *, rehash: bool = False):
 def test_shipped_refiner_manifests_carry_their_content_hash(folder):
     manifest, paths = read_refiner_manifest(_WEIGHTS / folder, _PARTS)
     assert manifest[CONTENT_KEY] == content_sha256(manifest)
-    assert set(paths) == set(_PARTS) - {"flaw_denoiser"} and len(manifest["action_names"]) == 12  # an option, not shipped
+    assert set(paths) == set(_PARTS) - {"flaw_denoiser", "motion_infiller"} and len(manifest["action_names"]) == 12  # options, not shipped
 
 
 def test_shipped_generator_manifest_carries_its_content_hash():
