@@ -96,3 +96,20 @@ def test_report_names_the_quantity_its_threshold_applies_to():
     learned = RefinementReport(mode="full", n_frames=3, threshold=0.93, flaw_probability=[0.1, 0.2, 0.3])
     assert learned.to_dict()["threshold_quantity"] == "flaw_probability"
     assert RefinementReport(mode="full", n_frames=3).to_dict()["threshold_quantity"] is None
+
+
+def test_thread_limits_hold_torch_and_blas_inside_and_restore_them():
+    from threadpoolctl import threadpool_info
+
+    from refiner.refinement.inputs import thread_limits
+
+    torch_before = torch.get_num_threads()
+    blas_before = {p["filepath"]: p["num_threads"] for p in threadpool_info()}
+    with thread_limits(1):
+        assert torch.get_num_threads() == 1
+        inside = threadpool_info()
+        assert inside and all(p["num_threads"] == 1 for p in inside)  # numpy / scipy / torch pools, one thread
+    assert torch.get_num_threads() == torch_before
+    assert {p["filepath"]: p["num_threads"] for p in threadpool_info()} == blas_before
+    with thread_limits(None):  # untouched
+        assert torch.get_num_threads() == torch_before

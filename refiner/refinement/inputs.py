@@ -4,10 +4,11 @@ from __future__ import annotations
 import numbers
 import os
 from contextlib import contextmanager
+from functools import lru_cache
 
 import numpy as np
 import torch
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 __all__ = ["MODES", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_metres",
            "check_metres_each", "check_threads", "thread_limits"]
@@ -46,6 +47,14 @@ def auto_threads(seq) -> int:
     return max(1, min(4, cores))
 
 
+@lru_cache(maxsize=1)
+def _blas_controller() -> ThreadpoolController:
+    """The BLAS / OpenMP libraries loaded when ``refine`` is first called (numpy, scipy and torch are
+    imported by then). Finding them takes about 1.7 ms, a third of a 60-frame clip's refinement, so it is
+    done once and the limits are set through it on every call."""
+    return ThreadpoolController()
+
+
 @contextmanager
 def thread_limits(threads: int | None):
     """torch intra-op and BLAS threads set to ``threads`` inside the block, restored after (None: untouched)."""
@@ -55,7 +64,7 @@ def thread_limits(threads: int | None):
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
-        with threadpool_limits(threads):  # under load, free BLAS threads made a call 3-12x slower
+        with _blas_controller().limit(limits=threads):  # under load, free BLAS threads made a call 3-12x slower
             yield
     finally:
         torch.set_num_threads(before)
