@@ -94,13 +94,15 @@ TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet",
 #: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
 #: the given frames (:func:`_select` with the one candidate): a body moved back over skating feet or
 #: a network correction is right for gliding and floating bodies and wrong for a wrong pose, which
-#: skates too; smoothing unverified made a real generator's samples less real (FID +3.6 %).
-#: Re-timing stays unverified: the classifier rejected most re-timed stalls, which remove 42 % there.
+#: skates too. Re-timing stays unverified: the classifier rejected most re-timed stalls, which remove
+#: 42 % there; so does smoothing, which it cannot judge: noise runs pass :data:`NOISE_RATIO` instead.
 VERIFY_TYPED = ("root", "pose")
 #: A noise run is repaired only where it is this many times noisier (jitter residual: distance from a
 #: Gaussian smoothing of sigma 1 frame) than its clip's median frame: noise is a local flaw, and a
 #: clip that is as rough everywhere has that texture from its generator (see :func:`noise_ratio`).
 NOISE_RATIO = 1.3
+#: A timing run is grown over the stall before it and the rush after it (:func:`stall_window`) before
+#: it is re-timed; False: the widened run alone, as in the previous release (frozen 58.9 % vs 50.6 %).
 STALL_WINDOW = True
 #: Detectors that can flag frames (``detect="classifier+recognizer"`` takes the union): the kinematic
 #: flaw classifier, the recognition network's flaw probability, the repair network's correction of
@@ -209,6 +211,9 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
         share = groups[lo:hi].mean(0)
         group = _GROUP_NAMES[int(np.argmax(share))]
         name, widen = TYPED_REPAIRS[group]
+        if group == "noise" and (ratio := noise_ratio(y, lo, hi)) < NOISE_RATIO:
+            return "keep", (lo, hi), y, (f"looks like noise, but no noisier than the rest of the clip (jitter "
+                                         f"{ratio:.2f} times the clip's median, under {NOISE_RATIO}); kept")
         name = "+".join(p if p in proposals else STAND_INS.get(p, p) for p in name.split("+"))  # weights without it
         a, c = max(lo - widen, 0), min(hi + widen, len(y))
         if group == "timing" and STALL_WINDOW:
@@ -221,9 +226,6 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
         note = f"; looks like a {group} flaw (group probability {share.max():.2f})"
         name = name + (f" (widened by {widen})" if widen else "")
         new = spliced(proposal, a, c)
-        if group == "noise" and (ratio := noise_ratio(y, lo, hi)) < NOISE_RATIO:
-            return "keep", (a, c), y, (f"looks like noise, but no noisier than the rest of the clip (jitter "
-                                       f"{ratio:.2f} times the clip's median, under {NOISE_RATIO}); kept")
         if group in VERIFY_TYPED:
             chosen, why = _select(refiner, y, {name: new}, a, c)
             if chosen == "keep":
