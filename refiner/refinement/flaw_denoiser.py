@@ -28,7 +28,7 @@ from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.training import TrainSchedule, fit_network, resolve_device, seeded
 from refiner.refinement.flaw_training import FlawBatches
 
-__all__ = ["FlawDenoiser", "FlawDenoiserNet", "denoiser_features", "corrected_frames_loss", "checked_batch",
+__all__ = ["FlawDenoiser", "FlawDenoiserNet", "CorrectionNetworkComponent", "denoiser_features", "corrected_frames_loss", "checked_batch",
            "DENOISE_KINDS"]
 
 #: Training mechanisms by default: the small flaws a correction of the given frames can undo (noise,
@@ -117,7 +117,34 @@ class FlawDenoiserNet(nn.Module):
         return x + delta * suspect[..., None, None].to(x.dtype)
 
 
-class FlawDenoiser(NetworkComponent):
+class CorrectionNetworkComponent(NetworkComponent):
+    """What the two estimators built on :class:`FlawDenoiserNet` share (this denoiser and the motion
+    in-filler of :mod:`refiner.refinement.infilling`): the network from the fitted skeleton and joint count,
+    and its training on a batch source whose ``inputs`` frames are corrected where ``mask`` is set.
+    Subclasses set ``hidden``, ``n_layers``, ``kernel``, ``velocity_weight`` and ``schedule`` and define
+    ``_loss``."""
+
+    def _make_network(self, fitted: dict) -> FlawDenoiserNet:
+        root = get_skeleton(fitted["skeleton_"]).root
+        return FlawDenoiserNet(fitted["n_joints_"], self.hidden, self.n_layers, self.kernel, root)
+
+    def _train(self, batches, val, inputs: str, mask: str, rng, checkpoint, desc: str) -> None:
+        """Build ``network_``, standardise its features on a sample of ``batches`` and train it (best weights
+        by the loss on ``val.validation_batch``); ``batches`` and ``val`` have ``sample`` / ``validation_batch``."""
+        schedule = self._schedule()
+        device = resolve_device(schedule.device)
+        with seeded(rng):
+            self.network_ = self._make_network({"skeleton_": self.skeleton_, "n_joints_": self.n_joints_})
+            stats = batches.sample(rng.choice(len(batches), size=min(256, len(batches))), np.random.default_rng(1))
+            self.network_.standardise(stats[inputs], stats[mask], stats["valid"])
+            self.network_.to(device)
+            self.history_ = fit_network(self.network_, self._loss, lambda idx, r: batches.sample(idx, r, device),
+                                        len(batches), val.validation_batch(device), schedule, rng,
+                                        checkpoint=checkpoint, desc=desc)
+        self.network_.to("cpu").eval()
+
+
+class FlawDenoiser(CorrectionNetworkComponent):
     """Corrects suspect frames from the frames themselves and their context (see the module docstring).
 
     Parameters
@@ -163,10 +190,6 @@ class FlawDenoiser(NetworkComponent):
         self.schedule = schedule
         self.random_state = random_state
 
-    def _make_network(self, fitted: dict) -> FlawDenoiserNet:
-        root = get_skeleton(fitted["skeleton_"]).root
-        return FlawDenoiserNet(fitted["n_joints_"], self.hidden, self.n_layers, self.kernel, root)
-
     def fit(self, clips, *, skeleton: str = "humanact12", validation=None, checkpoint=None) -> "FlawDenoiser":
         """Train on real clips ``(T_i, J, 3)`` metres with synthetic flaws; ``validation``: held-out clips."""
         rng = check_random_state(self.random_state)
@@ -174,8 +197,6 @@ class FlawDenoiser(NetworkComponent):
         self.skeleton_ = get_skeleton(skeleton).name
         self.n_joints_ = int(clips[0].shape[1])
         self.threshold_ = float("inf")
-        schedule = self._schedule()
-        device = resolve_device(schedule.device)
         batches = FlawBatches(clips, None, None, skeleton=self.skeleton_, lengths=(32, self.window),
                               kinds=list(self.kinds), hide_probability=0.0, n_actions=1,
                               rigid_tolerance=self.rigid_tolerance)
@@ -183,15 +204,7 @@ class FlawDenoiser(NetworkComponent):
         val = FlawBatches(held, None, None, skeleton=self.skeleton_, lengths=(self.window, self.window),
                           kinds=list(self.kinds), hide_probability=0.0, n_actions=1,
                           rigid_tolerance=self.rigid_tolerance)
-        with seeded(rng):
-            self.network_ = self._make_network({"skeleton_": self.skeleton_, "n_joints_": self.n_joints_})
-            stats = batches.sample(rng.choice(len(batches), size=min(256, len(batches))), np.random.default_rng(1))
-            self.network_.standardise(stats["flawed"], stats["suspect"], stats["valid"])
-            self.network_.to(device)
-            self.history_ = fit_network(self.network_, self._loss, lambda idx, r: batches.sample(idx, r, device),
-                                        len(batches), val.validation_batch(device), schedule, rng,
-                                        checkpoint=checkpoint, desc="flaw denoiser")
-        self.network_.to("cpu").eval()
+        self._train(batches, val, "flawed", "suspect", rng, checkpoint, "flaw denoiser")
         return self
 
     def _loss(self, net, batch, rng) -> torch.Tensor:

@@ -20,9 +20,9 @@ import torch
 from refiner.core.signal import linear_infill
 from refiner.core.skeletons import get_skeleton
 from refiner.core.validation import check_is_fitted, check_random_state
-from refiner.nn.components import NOT_FITTED, NetworkComponent
-from refiner.nn.training import TrainSchedule, crop_start, fit_network, resolve_device, seeded, to_device
-from refiner.refinement.flaw_denoiser import FlawDenoiserNet, checked_batch, corrected_frames_loss
+from refiner.nn.components import NOT_FITTED
+from refiner.nn.training import TrainSchedule, crop_start, to_device
+from refiner.refinement.flaw_denoiser import CorrectionNetworkComponent, checked_batch, corrected_frames_loss
 
 __all__ = ["MotionInfiller", "GapBatches"]
 
@@ -68,7 +68,7 @@ class GapBatches:
         return self.sample(rng.choice(len(self), size=size, replace=len(self) < size), rng, device)
 
 
-class MotionInfiller(NetworkComponent):
+class MotionInfiller(CorrectionNetworkComponent):
     """Frames in-filled from the clip around them (see the module docstring).
 
     Parameters
@@ -107,30 +107,16 @@ class MotionInfiller(NetworkComponent):
         self.schedule = schedule
         self.random_state = random_state
 
-    def _make_network(self, fitted: dict) -> FlawDenoiserNet:
-        root = get_skeleton(fitted["skeleton_"]).root
-        return FlawDenoiserNet(fitted["n_joints_"], self.hidden, self.n_layers, self.kernel, root)
-
     def fit(self, clips, *, skeleton: str = "humanact12", validation=None, checkpoint=None) -> "MotionInfiller":
         """Train on real clips ``(T_i, J, 3)`` metres; ``validation``: clips of held-out subjects."""
         rng = check_random_state(self.random_state)
         clips = [np.asarray(c, np.float32) for c in clips]
         self.skeleton_ = get_skeleton(skeleton).name
         self.n_joints_ = int(clips[0].shape[1])
-        schedule = self._schedule()
-        device = resolve_device(schedule.device)
         gap = tuple(int(g) for g in self.gap)
         batches = GapBatches(clips, length=self.window, gap=gap)
         val = GapBatches(clips if validation is None else validation, length=self.window, gap=gap)
-        with seeded(rng):
-            self.network_ = self._make_network({"skeleton_": self.skeleton_, "n_joints_": self.n_joints_})
-            stats = batches.sample(rng.choice(len(batches), size=min(256, len(batches))), np.random.default_rng(1))
-            self.network_.standardise(stats["given"], stats["gap"], stats["valid"])
-            self.network_.to(device)
-            self.history_ = fit_network(self.network_, self._loss, lambda idx, r: batches.sample(idx, r, device),
-                                        len(batches), val.validation_batch(device), schedule, rng,
-                                        checkpoint=checkpoint, desc="motion infiller")
-        self.network_.to("cpu").eval()
+        self._train(batches, val, "given", "gap", rng, checkpoint, "motion infiller")
         return self
 
     def _loss(self, net, batch, rng) -> torch.Tensor:

@@ -32,6 +32,12 @@ __all__ = ["stall_window", "retime_run", "forward_retime_run", "smooth_run", "sp
            "CANDIDATES"]
 
 
+def _frame_speed(y: np.ndarray) -> tuple[np.ndarray, float]:
+    """Mean joint speed ``(T - 1,)`` of ``y (T, J, 3)`` (``speed[t]``: frame t -> t + 1) and its median."""
+    speed = np.linalg.norm(np.diff(y, axis=0), axis=-1).mean(-1)
+    return speed, max(float(np.median(speed)), 1e-9)
+
+
 def _bounds(n: int, lo: int, hi: int) -> tuple[int, int]:
     """Kept frames on each side of the run (or the run's own ends at the clip's edges)."""
     return max(lo - 1, 0), min(hi, n - 1)
@@ -79,8 +85,8 @@ def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall:
     """:func:`retime_run` where the run holds still (mean joint speed under ``stall`` of the clip's
     median for ``min_frames`` frames in a row), else no change: re-timing a run that never stops
     moved it further from the truth (time warps) while it cured stalls."""
-    speed = np.linalg.norm(np.diff(y, axis=0), axis=-1).mean(-1)
-    still = speed[max(lo - 1, 0) : hi] < stall * max(float(np.median(speed)), 1e-9)
+    speed, median = _frame_speed(y)
+    still = speed[max(lo - 1, 0) : hi] < stall * median
     run = np.convolve(still.astype(int), np.ones(min_frames, int), mode="valid")
     return retime_run(y, lo, hi, skeleton) if run.size and run.max() >= min_frames else y.copy()
 
@@ -90,8 +96,7 @@ def stall_window(y: np.ndarray, lo: int, hi: int, *, stall: float = 0.1, rush: f
     """``[lo, hi)`` grown over the stall before it (mean joint speed under ``stall`` of the clip's median)
     and the rush after it (over ``rush`` times the median), by at most ``reach`` frames each side: a
     stalled transition must be re-timed from where it stops to where it has caught up."""
-    speed = np.linalg.norm(np.diff(y, axis=0), axis=-1).mean(-1)  # speed[t]: frame t -> t + 1
-    median = max(float(np.median(speed)), 1e-9)
+    speed, median = _frame_speed(y)
     a, c = lo, hi
     while a > max(lo - reach, 1) and speed[a - 1] < stall * median:
         a -= 1

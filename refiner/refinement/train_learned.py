@@ -40,12 +40,10 @@ LEARNED_CONFIGS = {
 #: holds the fields that differ from the estimator's default schedule.
 CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, copies=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
-#: The flaw denoiser's settings (about 20 minutes on one CPU core) and its tiny test version.
-DENOISER_CONFIGS = {"default": dict(schedule=dict()),
-                    "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
-#: The motion in-filler's settings (about 40 minutes on one CPU core) and its tiny test version.
-INFILLER_CONFIGS = {"default": dict(schedule=dict()),
-                    "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
+#: The settings of the two convolution networks that correct frames, the flaw denoiser (about 38 minutes on
+#: one CPU core) and the motion in-filler (about 40), and their tiny test version.
+CORRECTION_CONFIGS = {"default": dict(schedule=dict()),
+                      "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer")
 #: Parts trained only when asked (``only=``): the denoiser and the motion in-filler serve options of the
 #: refiner (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
@@ -53,7 +51,7 @@ LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer")
 OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller")
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
             "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller}
-_CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": DENOISER_CONFIGS, "motion_infiller": INFILLER_CONFIGS}
+_CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": CORRECTION_CONFIGS, "motion_infiller": CORRECTION_CONFIGS}
 
 
 def calibration_split(subjects) -> np.ndarray:
