@@ -165,3 +165,33 @@ def test_transition_refiner_calibrate_sets_its_one_threshold(synthetic):
     assert strict == model.threshold_ and loose <= strict
     flagged = [r > strict for c, a in zip(clips, anchors) for r in model.refine_transitions(c, a)[1]]
     assert np.mean(flagged) < 0.1  # about 1 % of these real transitions are above it
+
+
+def test_training_ends_on_the_best_or_the_last_weights(rng):
+    """``keep_best``: the weights of the lowest validation loss, or the last epoch's."""
+    import torch
+
+    from refiner.nn.training import fit_network
+
+    x = torch.from_numpy(rng.normal(size=(64, 3)).astype(np.float32))
+    y = x @ torch.tensor([[1.0], [-2.0], [0.5]])
+
+    def loss(net, batch, r):
+        return torch.nn.functional.mse_loss(net(batch["x"]), batch["y"])
+
+    def run(keep_best):
+        torch.manual_seed(0)
+        net = torch.nn.Linear(3, 1)
+        # validation on the negated targets: the loss there grows as training fits the real ones
+        history = fit_network(net, loss, lambda idx, r: {"x": x[idx], "y": y[idx]}, 64, {"x": x, "y": -y},
+                              TrainSchedule(n_epochs=6, batch_size=16, learning_rate=0.05, patience=10,
+                                            keep_best=keep_best, device="cpu"), np.random.default_rng(0))
+        return net, history
+
+    best, history = run(True)
+    last, _ = run(False)
+    vals = [h["val"] for h in history]
+    assert int(np.argmin(vals)) < len(vals) - 1  # the last epoch is not the best one
+    with torch.no_grad():
+        assert float(loss(best, {"x": x, "y": -y}, None)) == pytest.approx(min(vals), rel=1e-5)
+        assert float(loss(last, {"x": x, "y": -y}, None)) == pytest.approx(vals[-1], rel=1e-5)

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from refiner.core.manifest import CONTENT_KEY, content_sha256, read_generator_manifest, read_refiner_manifest, write_manifest
-from refiner.reference import WEIGHTS_DIR, load_reference_generator
+from refiner.reference import GENERATOR_KINDS, WEIGHTS_DIR, load_reference_generator
 from refiner.refinement.pipeline import _PARTS, _WEIGHTS, Refiner
 
 
@@ -40,7 +40,7 @@ def test_shipped_refiner_manifests_carry_their_content_hash(folder):
 
 def test_shipped_generator_manifest_carries_its_content_hash():
     manifest, paths = read_generator_manifest(WEIGHTS_DIR)
-    assert manifest[CONTENT_KEY] == content_sha256(manifest) and set(paths) == {"a2m", "actor", "mdm"}
+    assert manifest[CONTENT_KEY] == content_sha256(manifest) and set(paths) == set(GENERATOR_KINDS)
 
 
 @pytest.mark.parametrize("change", [

@@ -77,7 +77,7 @@ def test_doctor_reports_weights_evaluators_data_and_torch(no_shared):
     weights = {w["name"]: w for w in report["weights"]}
     assert set(weights) >= {"humanact12", "humanact12-train", "generators", "evaluators"}
     assert all(w["verified"] and w["error"] is None for w in weights.values())
-    assert weights["generators"]["entries"] == ["a2m", "actor", "mdm"]
+    assert sorted(weights["generators"]["entries"]) == ["a2m", "a2m-large", "actor", "actor-large", "mdm"]
     assert "flaw_classifier" in weights["humanact12"]["entries"]
     evaluators = {e["name"]: e for e in report["evaluators"]}
     assert evaluators["humanact12"]["shipped"] == evaluators["humanact12"]["used"]

@@ -20,7 +20,8 @@ from typing import Any, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from refiner.cli.options import GIF_DPI, GIF_PANEL_PX, gif_size_argument, int_or_str, set_threads, threads_argument
+from refiner.cli.options import (GENERATOR_NAMES, GIF_DPI, GIF_PANEL_PX, gif_size_argument, int_or_str, set_threads,
+                                  threads_argument)
 from refiner.core.validation import check_action
 from refiner.io.datasets import HUMANACT12_ACTIONS
 from refiner.plugins.manager import get_plugin_manager
@@ -32,8 +33,9 @@ __all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "form
 
 def demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder (created)")
-    p.add_argument("--generator", default="a2m", choices=["a2m", "actor", "mdm"],
-                   help="reference generator: a2m (Lie GRU VAE, default) or actor (transformer CVAE)")
+    p.add_argument("--generator", default="a2m", choices=GENERATOR_NAMES,
+                   help="reference generator: a2m (Lie GRU VAE, default), actor (transformer CVAE), mdm (diffusion); "
+                        "-large: the larger, longer-trained variants")
     p.add_argument("--actions", default=None,
                    help="comma-separated action names or indices (default: all 12; --quick: walk, boxing)")
     p.add_argument("--seed", type=int, default=0)
@@ -130,7 +132,7 @@ def run_demo(
     ----------
     out : path
         Output folder (created).
-    generator : {"a2m", "actor", "mdm"}, default="a2m"
+    generator : {"a2m", "actor", "mdm", "a2m-large", "actor-large"}, default="a2m"
         Which shipped reference generator to sample.
     actions : sequence of int or str, optional
         HumanAct12 actions; default all 12 (two with ``quick``).

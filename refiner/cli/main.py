@@ -30,7 +30,7 @@ COMMANDS: dict[str, tuple[str, Callable, Callable]] = {
     "demo": ("sample every action from a reference generator, refine, write pictures and a table",
              demo_arguments, demo_run),
     "refine": ("refine motion files (.npy/.npz joints or raw generator output)", refine_arguments, refine_run),
-    "train-generator": ("train a reference generator (a2m or actor) on HumanAct12",
+    "train-generator": ("train a reference generator (a2m, actor, mdm, a2m-large, actor-large) on HumanAct12",
                         train_generator_arguments, train_generator_run),
     "doctor": ("show what is installed: weights, evaluators, data found, torch/CUDA, threads",
                doctor_arguments, doctor_run),

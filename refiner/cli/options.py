@@ -1,13 +1,16 @@
-"""Command-line options several sub-commands share: GIF size, torch threads, ints and action names."""
+"""Command-line options several sub-commands share: GIF size, torch threads, ints, action and generator names."""
 from __future__ import annotations
 
 import argparse
 
 __all__ = ["GIF_PANEL_PX", "GIF_DPI", "gif_size_argument", "threads_argument", "set_threads", "positive_int",
-           "int_or_str"]
+           "int_or_str", "GENERATOR_NAMES"]
 
 #: Default edge of one GIF panel in pixels (the demo's and ``refine --gif``'s before/after animations).
 GIF_PANEL_PX = 320
+#: The reference generators' short names (``refiner.reference.GENERATOR_KINDS``' keys, which import torch;
+#: a test keeps the two equal), choices of ``demo --generator`` and ``train-generator --kind``.
+GENERATOR_NAMES = ("a2m", "actor", "mdm", "a2m-large", "actor-large")
 #: Resolution the GIFs are drawn at; a panel is ``GIF_PANEL_PX / GIF_DPI`` inches.
 GIF_DPI = 80
 

@@ -1,19 +1,20 @@
-"""``motion-refiner train-generator``: train a reference generator (a2m, actor or mdm) on HumanAct12."""
+"""``motion-refiner train-generator``: train a reference generator (a2m, actor, mdm and the -large kinds) on HumanAct12."""
 from __future__ import annotations
 
 import argparse
 import shlex
 from pathlib import Path
 
-from refiner.cli.options import set_threads
+from refiner.cli.options import GENERATOR_NAMES, set_threads
 from refiner.io.datasets import load_dataset
 
 __all__ = ["train_generator_arguments", "train_generator_run"]
 
 
 def train_generator_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--kind", required=True, choices=["a2m", "actor", "mdm"],
-                   help="a2m: Action2Motion-style Lie GRU VAE; actor: ACTOR-style transformer CVAE; mdm: MDM-style diffusion")
+    p.add_argument("--kind", required=True, choices=GENERATOR_NAMES,
+                   help="a2m: Action2Motion-style Lie GRU VAE; actor: ACTOR-style transformer CVAE; mdm: MDM-style "
+                        "diffusion; a2m-large, actor-large: the same designs, larger")
     p.add_argument("--out", type=Path, required=True,
                    help="folder for <kind>.safetensors and manifest.json (refiner/weights/generators ships them)")
     p.add_argument("--data", type=Path, default=None, help="HumanAct12 file or folder (default: ../shared/data/...)")

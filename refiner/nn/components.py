@@ -25,7 +25,9 @@ class NetworkComponent(BaseEstimator):
     """A component whose learned state is ``network_`` plus JSON-able fitted attributes.
 
     Subclasses implement ``_make_network(fitted: dict) -> nn.Module`` and list their non-network
-    fitted attributes in ``_fitted_attributes`` (JSON values) and ``_fitted_arrays`` (numpy arrays).
+    fitted attributes in ``_fitted_attributes`` (JSON values) and ``_fitted_arrays`` (numpy arrays);
+    ``_optional_arrays`` are saved when fitted (float16 with ``half``, like the weights) and loaded
+    when in the file (state that only some hyper-parameter values fit).
     Their training settings are one hyper-parameter, ``schedule`` (a :class:`~refiner.nn.training.TrainSchedule`,
     saved as a dict); a subclass that still declares the schedule's fields one by one (``n_epochs``,
     ``batch_size``, ..., ``verbose``) is served too.
@@ -33,6 +35,7 @@ class NetworkComponent(BaseEstimator):
 
     _fitted_attributes: tuple[str, ...] = ()
     _fitted_arrays: tuple[str, ...] = ()
+    _optional_arrays: tuple[str, ...] = ()
 
     def _schedule(self) -> TrainSchedule:
         """The schedule ``fit`` trains with (``ValueError`` when ``schedule`` is not a TrainSchedule)."""
@@ -80,6 +83,8 @@ class NetworkComponent(BaseEstimator):
             v = v.detach().cpu().contiguous()
             tensors[f"network.{k}"] = v.half() if half and v.is_floating_point() else v
         tensors.update({f"array.{name}": np.asarray(getattr(self, name)) for name in self._fitted_arrays})
+        tensors.update({f"array.{name}": np.asarray(getattr(self, name), np.float16 if half else None)
+                        for name in self._optional_arrays if hasattr(self, name)})
         fitted = {name: _jsonable(getattr(self, name)) for name in self._fitted_attributes}
         save_state(path, tensors, pack_metadata(self, **fitted))
 
@@ -93,6 +98,9 @@ class NetworkComponent(BaseEstimator):
             setattr(obj, name, fitted[name])
         for name in cls._fitted_arrays:
             setattr(obj, name, tensors[f"array.{name}"])
+        for name in cls._optional_arrays:
+            if f"array.{name}" in tensors:
+                setattr(obj, name, tensors[f"array.{name}"])
         network = obj._make_network(fitted)
         state = {k[len("network."):]: torch.from_numpy(v.copy()).float() if v.dtype == np.float16 else torch.from_numpy(v.copy())
                  for k, v in tensors.items() if k.startswith("network.")}

@@ -77,7 +77,10 @@ class TrainSchedule:
     gives back what was passed. ``n_epochs`` x ``steps_per_epoch`` steps (default: one pass over the
     training items per epoch) of ``batch_size`` items; Adam at ``learning_rate`` with polynomial decay
     (``power``); early stop after ``patience`` epochs without a better validation loss or after
-    ``max_seconds``; ``device`` ("auto": CUDA when available); ``progress`` shows a progress bar.
+    ``max_seconds``; ``device`` ("auto": CUDA when available); ``progress`` shows a progress bar;
+    ``keep_best``: with validation data, training ends on the weights of the best validation loss,
+    else on the last epoch's (a generator's samples can go on improving after its validation loss
+    stops: the a2m-large's recogniser accuracy rose 75.7 -> 78.7 % in the 100 epochs after its best one).
     """
 
     n_epochs: int = 200
@@ -89,6 +92,7 @@ class TrainSchedule:
     max_seconds: float | None = None
     device: str = "auto"
     progress: bool = False
+    keep_best: bool = True
 
 
 def crop_start(n_frames: int, length: int, rng: np.random.Generator, *, holding: int | None = None) -> int:
@@ -167,7 +171,7 @@ def fit_network(
 
     ``make_batch(indices, rng)`` builds a batch (tensors on the right device) for training items
     ``indices``; ``loss_fn(network, batch, rng)`` returns a scalar loss. With ``val_batch`` the
-    best weights by validation loss are kept and training stops after ``patience`` epochs without
+    best weights by validation loss are kept (``schedule.keep_best``) and training stops after ``patience`` epochs without
     improvement. With ``checkpoint`` the state is saved every epoch and a run resumes from it.
     """
     started = time.perf_counter()
@@ -213,7 +217,7 @@ def fit_network(
             break
         if val_batch is not None and epoch - int(np.argmin([h["val"] for h in history]) + history[0]["epoch"]) >= schedule.patience:
             break
-    if best[1] is not None:
+    if best[1] is not None and schedule.keep_best:
         network.load_state_dict(best[1])
     network.eval()
     return history

@@ -24,7 +24,7 @@ from refiner.nn.training import ClipCrops, fit_network, resolve_device, seeded
 from refiner.plugins.manager import PluginManager, get_plugin_manager
 
 __all__ = ["N_FRAMES", "ReferenceGenerator", "JointsGenerator", "median_bone_pose", "normal_noise", "pad_with_last_frame",
-           "training_crops"]
+           "training_crops", "training_data"]
 
 #: Crop length of the shipped generators (frames at 20 fps).
 N_FRAMES = 60
@@ -151,7 +151,7 @@ class ReferenceGenerator(NetworkComponent):
 
     def _split(self, data, rng):
         """``(clips, labels)`` of the training data and a held-out tenth for early stopping."""
-        clips, labels = _check_training_data(data, len(self.action_names))
+        clips, labels = training_data(data, len(self.action_names))
         order = rng.permutation(len(clips))
         n_val = max(1, len(clips) // 10) if len(clips) > 1 else 0
         val, train = order[:n_val], order[n_val:] if n_val else order
@@ -230,7 +230,7 @@ def median_bone_pose(clips: Sequence[np.ndarray]) -> np.ndarray:
     return firsts[best].astype(np.float32)
 
 
-def _check_training_data(data, n_actions: int) -> tuple[list[np.ndarray], np.ndarray]:
+def training_data(data, n_actions: int) -> tuple[list[np.ndarray], np.ndarray]:
     """Joints and labels of a MotionDataset or a sequence of labelled humanact12 Motions."""
     motions = getattr(data, "motions", data)
     if isinstance(motions, Motion):

@@ -16,9 +16,13 @@ from torch import nn
 
 from refiner.nn.layers import sinusoidal_positions
 from refiner.nn.training import TrainSchedule
-from refiner.reference.base import N_FRAMES, JointsGenerator, normal_noise
+from refiner.core.validation import check_is_fitted, check_random_state
+from refiner.reference.base import N_FRAMES, JointsGenerator, normal_noise, training_data
 
-__all__ = ["TransformerCVAE", "TransformerCVAEConfig", "TransformerCVAEGenerator"]
+__all__ = ["PRIORS", "TransformerCVAE", "TransformerCVAEConfig", "TransformerCVAEGenerator"]
+
+#: Latent priors :class:`TransformerCVAEGenerator` samples from.
+PRIORS = ("standard", "fitted")
 
 
 @dataclass
@@ -114,6 +118,20 @@ class TransformerCVAEGenerator(JointsGenerator):
         Weaker KL let the latent carry the action, so samples from the prior lost it (recogniser
         accuracy 29 % at 1e-3 against 42 % at 1e-2 in 150 s trials).
     velocity_weight : float, default=1.0
+    prior : {"standard", "fitted"}, default="standard"
+        Where :meth:`sample` draws the latent. ``"standard"``: N(0, I), as ACTOR. ``"fitted"``: a Gaussian
+        per action fitted, after training, to the posterior means of ``n_prior_crops`` random crops
+        of every training clip (ex-post density estimation, Ghosh et al. 2020). A weak KL term leaves
+        holes in N(0, I) that decode to no action; a strong one makes the decoder ignore the latent
+        (``kl_weight`` 1e-2: 6 of 128 latent dimensions used, samples a fifth of the real joint speed).
+        With ``kl_weight`` 1e-4 after 217 epochs (600 samples): recogniser accuracy 50 -> 80 %, FID
+        3.37 -> 1.61 from ``"standard"`` to ``"fitted"``.
+    n_prior_crops : int, default=8
+    guidance : float, default=0.0
+        With ``prior="fitted"``: each sampled latent is pushed by ``guidance`` times its action's prior
+        mean minus the mean over actions, away from what the actions share, as classifier-free
+        guidance pushes a diffusion model's prediction away from the unconditional one (``mdm``
+        uses 2.5). It trades diversity within an action for recognisable actions.
     n_frames : int, default=60
     schedule : TrainSchedule, default=TrainSchedule(n_epochs=150, batch_size=64, learning_rate=1e-3, patience=40)
     random_state : int or None, default=0
@@ -127,15 +145,21 @@ class TransformerCVAEGenerator(JointsGenerator):
     action_names_ : list of str
     mean_, std_ : ndarray of shape (24, 3), float32
         Standardisation of the joints (metres).
+    prior_mean_ : ndarray of shape (n_actions, d_model), float32 (float16 when loaded from a half file)
+        With ``prior="fitted"``: the per-action mean of the latent.
+    prior_scale_ : ndarray of shape (n_actions, d_model, d_model), float32 (float16 when loaded from a half file)
+        With ``prior="fitted"``: the per-action Cholesky factor of its covariance.
     history_ : list of dict
     train_seconds_ : float
     """
 
     _fitted_attributes = ("action_names_", "history_", "train_seconds_")
+    _optional_arrays = ("prior_mean_", "prior_scale_")
     _desc = "actor transformer CVAE"
 
     def __init__(self, d_model: int = 64, *, n_layers: int = 2, n_heads: int = 4, ffn_dim: int = 128, dropout: float = 0.0,
-                 kl_weight: float = 1e-2, velocity_weight: float = 1.0, n_frames: int = N_FRAMES,
+                 kl_weight: float = 1e-2, velocity_weight: float = 1.0, prior: str = "standard", n_prior_crops: int = 8,
+                 guidance: float = 0.0, n_frames: int = N_FRAMES,
                  action_names: Sequence[str] | None = None,
                  schedule: TrainSchedule = TrainSchedule(n_epochs=150, batch_size=64, learning_rate=1e-3, patience=40),
                  random_state: int | None = 0, warm_start: bool = False):
@@ -146,11 +170,43 @@ class TransformerCVAEGenerator(JointsGenerator):
         self.dropout = dropout
         self.kl_weight = kl_weight
         self.velocity_weight = velocity_weight
+        self.prior = prior
+        self.n_prior_crops = n_prior_crops
+        self.guidance = guidance
         self.n_frames = n_frames
         self.action_names = action_names
         self.schedule = schedule
         self.random_state = random_state
         self.warm_start = warm_start
+
+    def fit(self, data, *, checkpoint=None) -> "TransformerCVAEGenerator":
+        """Train (see :meth:`ReferenceGenerator.fit`); with ``prior="fitted"`` then fit the latent prior."""
+        if self.prior not in PRIORS:
+            raise ValueError(f"`prior` must be one of {', '.join(map(repr, PRIORS))}; got {self.prior!r}.")
+        super().fit(data, checkpoint=checkpoint)
+        for name in self._optional_arrays:  # a prior fitted to an earlier network no longer holds
+            self.__dict__.pop(name, None)
+        if self.prior == "fitted":
+            self._fit_prior(*training_data(data, len(self.action_names_)))
+        return self
+
+    @torch.no_grad()
+    def _fit_prior(self, clips: Sequence[np.ndarray], labels: np.ndarray) -> None:
+        """Per-action Gaussian of the posterior means of ``n_prior_crops`` random crops per clip."""
+        net, rng = self.network_.eval(), check_random_state(self.random_state)
+        crops = self._crops(clips)
+        actions = torch.from_numpy(labels).to(self.device_)
+        mus = [net.encode(self._normalised(crops.sample(range(len(clips)), rng), self.device_), actions)[0].cpu().numpy()
+               for _ in range(self.n_prior_crops)]
+        mus, labels = np.concatenate(mus).astype(np.float64), np.tile(labels, self.n_prior_crops)
+        d = mus.shape[1]
+        means, scales = np.zeros((len(self.action_names_), d)), np.tile(np.eye(d), (len(self.action_names_), 1, 1))
+        for a in np.unique(labels):
+            m = mus[labels == a]
+            means[a] = m.mean(0)
+            if len(m) > 1:  # ridge: a few clips span fewer dimensions than the latent has
+                scales[a] = np.linalg.cholesky(np.cov(m.T) + 1e-4 * np.eye(d))
+        self.prior_mean_, self.prior_scale_ = means.astype(np.float32), scales.astype(np.float32)
 
     def _make_network(self, fitted: dict) -> TransformerCVAE:
         return TransformerCVAE(TransformerCVAEConfig(len(fitted["action_names_"]), 24, self.d_model, self.n_layers,
@@ -167,8 +223,13 @@ class TransformerCVAEGenerator(JointsGenerator):
         return nn.functional.mse_loss(recon, x) + self.velocity_weight * vel + self.kl_weight * kl
 
     def _draw(self, net: TransformerCVAE, actions: torch.Tensor, rng: np.random.Generator) -> np.ndarray:
-        """Samples from the prior N(0, I), ``(n, n_frames, 24, 3)`` float32: joint positions in metres,
+        """Samples from the prior (``prior``), ``(n, n_frames, 24, 3)`` float32: joint positions in metres,
         HumanAct12's y-down frame, first-frame root near the origin."""
         z = normal_noise(rng, (len(actions), net.config.d_model), actions)
+        if self.prior == "fitted":
+            check_is_fitted(self, "prior_mean_", msg="%(name)s has no fitted prior; fit it with prior='fitted'.")
+            means = torch.from_numpy(self.prior_mean_).float().to(z.device)
+            mean = means[actions] + self.guidance * (means[actions] - means.mean(0))
+            z = mean + torch.einsum("bij,bj->bi", torch.from_numpy(self.prior_scale_).float().to(z.device)[actions], z)
         x = net.decode(z, actions, self.n_frames).cpu().numpy()
         return self._metres(x)
