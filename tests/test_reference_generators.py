@@ -309,6 +309,22 @@ def test_fitted_prior_is_each_actions_posterior_gaussian(small_set, tmp_path):
 
 
 @pytest.mark.real_data
+@pytest.mark.parametrize("kind", ["a2m-large", "actor-large"])
+def test_large_kinds_train_tiny_with_their_own_settings(kind, tmp_path, small_set):
+    """``--quick`` shrinks the network but keeps the kind's other settings (the large actor's fitted prior)."""
+    from refiner.reference import train_reference_generator
+
+    gen = train_reference_generator(kind, small_set, tmp_path, quick=True)
+    back = load_reference_generator(kind, folder=tmp_path)
+    assert back.get_params() == gen.get_params() and (tmp_path / f"{kind}.safetensors").is_file()
+    np.testing.assert_allclose(back.sample(2, 2, random_state=0), gen.sample(2, 2, random_state=0), atol=5e-2)
+    if kind == "actor-large":
+        assert back.prior == "fitted" and back.guidance == 1.0 and back.prior_scale_.shape == (12, 16, 16)
+    else:
+        assert back.hidden == 16 and not back.schedule.keep_best
+
+
+@pytest.mark.real_data
 def test_training_from_a_file_of_other_sizes_is_refused(tiny_fitted, tmp_path, humanact12):
     from refiner.reference import train_reference_generator
 
