@@ -331,3 +331,28 @@ def test_training_from_a_file_of_other_sizes_is_refused(tiny_fitted, tmp_path, h
     tiny_fitted[TransformerCVAEGenerator].save(tmp_path / "tiny.safetensors")
     with pytest.raises(ValueError, match="not a generator of kind 'actor-large'"):
         train_reference_generator("actor-large", humanact12, tmp_path, init=tmp_path / "tiny.safetensors", quick=True)
+
+
+def test_lie_vae_guidance_extrapolates_the_action_code():
+    """Guidance g feeds ``onehot + g (onehot - 1/C)``: the code keeps its sum, g = 0 is the trained one-hot."""
+    import torch
+
+    from refiner.reference.lie_vae import LieVAE, LieVAEConfig
+
+    torch.manual_seed(0)
+    net = LieVAE(LieVAEConfig(n_actions=4, pose_dim=6, hidden=8, latent_dim=2))
+    prev, actions = torch.zeros(2, 3, 6), torch.tensor([1, 3])
+    code = net.condition(prev, actions, guidance=0.5)[..., 6:10]
+    np.testing.assert_allclose(code[0, 0].numpy(), [-0.125, 1.375, -0.125, -0.125])
+    np.testing.assert_allclose(code.sum(-1).numpy(), 1.0, rtol=1e-6)
+    assert torch.equal(net.condition(prev, actions, guidance=0.0), net.condition(prev, actions))
+    noise = torch.randn(2, 5, 2)
+    with torch.no_grad():
+        plain = net.generate(actions, noise)
+        assert torch.equal(plain, net.generate(actions, noise, guidance=0.0))
+        assert not torch.allclose(plain, net.generate(actions, noise, guidance=1.0))
+
+
+def test_shipped_generators_sample_with_their_kinds_guidance():
+    for kind in ("a2m-large", "actor-large"):
+        assert load_reference_generator(kind).guidance == KIND_PARAMETERS[kind]["guidance"]

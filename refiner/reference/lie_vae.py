@@ -106,10 +106,17 @@ class LieVAE(nn.Module):
             self.posterior_head.bias[c.latent_dim:] = -4.0
             self.prior_head.bias[c.latent_dim:] = -4.0
 
-    def condition(self, previous: torch.Tensor, actions: torch.Tensor, start: int = 0) -> torch.Tensor:
-        """``previous (B, L, D)`` poses, ``actions (B,)`` -> ``(B, L, D + C + 1)`` step inputs from frame ``start``."""
+    def condition(self, previous: torch.Tensor, actions: torch.Tensor, start: int = 0,
+                  guidance: float = 0.0) -> torch.Tensor:
+        """``previous (B, L, D)`` poses, ``actions (B,)`` -> ``(B, L, D + C + 1)`` step inputs from frame ``start``.
+
+        ``guidance`` g extrapolates the action code away from the uniform mixture of all actions:
+        ``onehot + g (onehot - 1 / C)`` (g = 0: the one-hot the network was trained on).
+        """
         b, length, _ = previous.shape
         onehot = nn.functional.one_hot(actions, self.config.n_actions).to(previous.dtype)
+        if guidance:
+            onehot = onehot + guidance * (onehot - 1.0 / self.config.n_actions)
         t = (torch.arange(start, start + length, device=previous.device, dtype=previous.dtype) / (N_FRAMES - 1))
         return torch.cat([previous, onehot[:, None].expand(b, length, -1), t[None, :, None].expand(b, length, 1)], -1)
 
@@ -146,14 +153,15 @@ class LieVAE(nn.Module):
         p_mu, p_logvar = (torch.cat(v, 1) for v in zip(*p))
         return torch.cat(out, 1), (q_mu, q_logvar), (p_mu, p_logvar.clamp(-10, 10))
 
-    def generate(self, actions: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:
-        """Autoregressive sampling from the learned prior: ``actions (B,)``, ``noise (B, T, Z)`` -> ``(B, T, D)``."""
+    def generate(self, actions: torch.Tensor, noise: torch.Tensor, guidance: float = 0.0) -> torch.Tensor:
+        """Autoregressive sampling from the learned prior: ``actions (B,)``, ``noise (B, T, Z)`` -> ``(B, T, D)``;
+        ``guidance`` as in :meth:`condition`."""
         b, n_frames, _ = noise.shape
         prev = noise.new_zeros(b, 1, self.config.pose_dim)
         h_prior = h_dec = None
         out = []
         for t in range(n_frames):
-            cond = self.condition(prev, actions, start=t)
+            cond = self.condition(prev, actions, start=t, guidance=guidance)
             hp, h_prior = self.prior(cond, h_prior)
             mu, logvar = self.prior_head(hp).chunk(2, -1)
             z = mu + noise[:, t : t + 1] * torch.exp(0.5 * logvar.clamp(-10, 10))
@@ -189,6 +197,11 @@ class LieVAEGenerator(ReferenceGenerator):
     warm_start : bool, default=False
         When fitted already, :meth:`fit` goes on training the fitted network (a fresh ``schedule``)
         instead of starting anew; ``history_`` and ``train_seconds_`` then add up.
+    guidance : float, default=0.0
+        Sampling only: the action code fed to the prior and the decoder is pushed away from the
+        uniform mixture of all actions, ``onehot + guidance (onehot - 1 / C)`` (the one-hot-input
+        analogue of classifier-free guidance; :data:`~refiner.reference.loading.KIND_PARAMETERS`
+        records how the ``a2m-large`` value was chosen).
 
     Attributes
     ----------
@@ -215,7 +228,7 @@ class LieVAEGenerator(ReferenceGenerator):
     def __init__(self, hidden: int = 128, *, latent_dim: int = 30, kl_weight: float = 1e-2, teacher_forcing: float = 0.0,
                  n_frames: int = N_FRAMES, action_names: Sequence[str] | None = None,
                  schedule: TrainSchedule = TrainSchedule(n_epochs=110, batch_size=128, learning_rate=1e-3, patience=30),
-                 random_state: int | None = 0, warm_start: bool = False):
+                 random_state: int | None = 0, warm_start: bool = False, guidance: float = 0.0):
         self.hidden = hidden
         self.latent_dim = latent_dim
         self.kl_weight = kl_weight
@@ -225,6 +238,7 @@ class LieVAEGenerator(ReferenceGenerator):
         self.schedule = schedule
         self.random_state = random_state
         self.warm_start = warm_start
+        self.guidance = guidance
 
     def _make_network(self, fitted: dict) -> LieVAE:
         return LieVAE(LieVAEConfig(len(fitted["action_names_"]), 72, self.hidden, self.latent_dim))
@@ -255,7 +269,7 @@ class LieVAEGenerator(ReferenceGenerator):
         :meth:`to_motions` (or the ``action2motion`` adapter with ``representation="lie"`` and
         ``reference=reference_``)."""
         noise = normal_noise(rng, (len(actions), self.n_frames, self.latent_dim), actions)
-        return net.generate(actions, noise).cpu().numpy().astype(np.float32)
+        return net.generate(actions, noise, self.guidance).cpu().numpy().astype(np.float32)
 
     def adapter_options(self) -> dict:
         check_is_fitted(self, "network_", msg=NOT_FITTED)
