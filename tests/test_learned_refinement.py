@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from refiner.core.signal import linear_infill, run_peak, window_starts
-from refiner.core.skeletons import rigid_skeleton
+from refiner.core.skeletons import BoneProportions, rigid_skeleton, robust_bone_lengths
 from refiner.core.skeletons import joint_bone_lengths, with_bone_lengths
 from refiner.evaluation.physics import bone_length_variation
 from refiner.refinement.flaw_networks import FlawRepairNet, FrameTransformerConfig
@@ -148,6 +148,51 @@ def test_rigid_skeleton_restores_stretched_bones(humanact12, rng):
     assert err(fixed) < err(stretched)
     same, v = rigid_skeleton(clip, "humanact12", 0.005)
     assert same is clip and v < 1e-4  # real mocap is rigid: nothing to do
+
+
+def test_robust_bone_lengths_trust_noise_and_doubt_drift(rng):
+    """A bone whose length is noisy keeps its median; one whose length drifts slowly is drawn to its share."""
+    prop = BoneProportions(np.array([0.5, 0.3, 0.2]), np.array([0.01, 0.01, 0.01]))
+    true = np.array([0.5, 0.3, 0.2])  # the clip's scale is 1
+    t = np.linspace(0, 1, 60)[:, None]
+    noisy = true + rng.normal(0, 0.01, (60, 3))
+    drifting = true + np.array([0.0, 0.0, 0.06]) * t  # the last bone grows by up to 30 %
+    got = robust_bone_lengths(np.stack([noisy, drifting]), prop)
+    np.testing.assert_array_equal(robust_bone_lengths(np.stack([noisy, drifting])), np.median(np.stack([noisy, drifting]), 1))
+    assert np.abs(got[0] - np.median(noisy, 0)).max() < 0.003  # noise: the median stands
+    assert abs(np.median(drifting[:, 2]) - 0.2) > 0.025 and abs(got[1, 2] - 0.2) < 0.01  # drift: the share wins
+    exact = np.repeat(true[None] * 1.1, 60, 0)  # a rigid clip of another person: its lengths, not the shares
+    exact[::3] *= 0.9
+    np.testing.assert_allclose(robust_bone_lengths(exact[None], prop)[0], true * 1.1)
+    assert prop.select(np.array([True, False, True])).mean.sum() == pytest.approx(1.0)
+
+
+@pytest.mark.real_data
+def test_rigid_skeleton_with_proportions_undoes_drifting_bones(humanact12):
+    """Joints that drift apart stretch their bones slowly; the learned proportions put them back nearer the truth."""
+    from refiner.evaluation.flaws import corrupt
+
+    prop = BoneProportions.from_clips([m.joints for m in humanact12.split("train").motions[::5]], "humanact12")
+    assert prop.mean.shape == (23,) and prop.mean.sum() == pytest.approx(1.0) and (prop.spread > 0).all()
+    errors = {"flawed": [], "median": [], "proportions": []}
+    for i in (5, 205, 405, 605, 805, 1005):
+        clip = humanact12[i]
+        flawed = corrupt(clip, "anchor_drift", 2, random_state=i).motion.joints.astype(np.float64)
+        err = lambda a: np.linalg.norm(a - clip.joints, axis=-1).mean()  # noqa: E731
+        errors["flawed"].append(err(flawed))
+        errors["median"].append(err(rigid_skeleton(flawed, "humanact12", 0.005)[0]))
+        errors["proportions"].append(err(rigid_skeleton(flawed, "humanact12", 0.005, proportions=prop)[0]))
+    mean = {k: np.mean(v) for k, v in errors.items()}
+    assert mean["proportions"] < 0.95 * mean["flawed"] and mean["proportions"] < 0.95 * mean["median"], mean
+
+
+def test_shipped_weights_know_bone_proportions():
+    """The learned weight sets carry their proportions and use them; ``rigid_lengths="median"`` keeps the old step."""
+    model = Refiner.pretrained("humanact12", split="train")
+    assert model.rigid_lengths == "proportions" and model.bone_proportions.mean.shape == (23,)
+    assert Refiner.pretrained("humanact12", split="train", rigid_lengths="median").rigid_lengths == "median"
+    with pytest.raises(ValueError, match="rigid_lengths"):
+        Refiner.pretrained("humanact12", split="train", rigid_lengths="mean")
 
 
 @pytest.mark.real_data

@@ -18,6 +18,8 @@ __all__ = [
     "register_skeleton",
     "bone_lengths",
     "rigid_skeleton",
+    "BoneProportions",
+    "robust_bone_lengths",
     "convert",
     "estimated_joints",
 ]
@@ -251,12 +253,15 @@ register_skeleton(Skeleton(
 
 
 def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, iterations: int = 60,
-                   bones: np.ndarray | None = None) -> tuple[np.ndarray, float | np.ndarray]:
-    """Joints ``(T, J, 3)`` put on their median bone lengths when any bone's length varies (std / mean)
+                   bones: np.ndarray | None = None, proportions: "BoneProportions | None" = None
+                   ) -> tuple[np.ndarray, float | np.ndarray]:
+    """Joints ``(T, J, 3)`` put on robust bone lengths when any bone's length varies (std / mean)
     by more than ``tolerance``; returns ``(joints, worst variation)`` (joints unchanged below it).
     A batch ``(B, T, J, 3)`` is judged and projected clip by clip in one pass; its variation is ``(B,)``.
     ``bones``: boolean mask ``(J - 1,)`` of the bones to judge and enforce (default all; a layout
     whose "bones" span a bending chain, such as UESTC's neck -> shoulder, leaves those out).
+    The lengths are the clip's medians, drawn toward human ``proportions`` where the clip's own
+    evidence is weak (:func:`robust_bone_lengths`).
 
     The lengths are enforced by moving both ends of every bone toward its length (Jacobi
     iterations of a constraint projection), which spreads each correction over the joints next to
@@ -278,10 +283,72 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
     out = xb.copy() if todo.any() else xb
     if todo.any():
         pairs = get_skeleton(skeleton).bones[use]
-        out[todo] = _project_lengths(xb[todo], pairs, np.median(lengths[todo], axis=1), iterations).astype(x.dtype)
+        prior = proportions.select(use) if proportions is not None else None
+        target = robust_bone_lengths(lengths[todo], prior)
+        out[todo] = _project_lengths(xb[todo], pairs, target, iterations).astype(x.dtype)
     if single:
         return (out[0] if todo[0] else joints), float(variation[0])
     return (out if todo.any() else joints), variation
+
+
+@dataclass(frozen=True)
+class BoneProportions:
+    """Human bone proportions learned from mocap: each bone's share of the summed bone lengths.
+
+    ``mean`` and ``spread`` ``(n_bones,)``: their mean and standard deviation over training clips
+    (each clip's median lengths). Build with :meth:`from_clips`; a manifest keeps :meth:`to_dict`.
+    """
+
+    mean: np.ndarray
+    spread: np.ndarray
+
+    @classmethod
+    def from_clips(cls, clips, skeleton: str) -> "BoneProportions":
+        """Proportions of real clips, each ``(T, J, 3)`` of ``skeleton``."""
+        lengths = np.stack([np.median(bone_lengths(np.asarray(c, np.float64), skeleton), axis=0) for c in clips])
+        shares = lengths / np.maximum(lengths.sum(1, keepdims=True), 1e-12)
+        return cls(shares.mean(0), shares.std(0))
+
+    @classmethod
+    def from_dict(cls, record: dict) -> "BoneProportions":
+        return cls(np.asarray(record["mean"], np.float64), np.asarray(record["spread"], np.float64))
+
+    def to_dict(self) -> dict:
+        return {"mean": [float(v) for v in self.mean], "spread": [float(v) for v in self.spread]}
+
+    def select(self, bones: np.ndarray) -> "BoneProportions":
+        """The proportions of the bones in the boolean mask ``bones``, shares renormalised to sum 1."""
+        total = self.mean[bones].sum()
+        return BoneProportions(self.mean[bones] / total, self.spread[bones] / total)
+
+
+def robust_bone_lengths(lengths: np.ndarray, proportions: BoneProportions | None = None, *,
+                        width: float = 1.0) -> np.ndarray:
+    """Each clip's bone lengths from per-frame lengths ``(B, T, n_bones)``: ``(B, n_bones)``, same units.
+
+    Without ``proportions``: the median over frames. With them, each bone's median is averaged with
+    the length its human share gives at the clip's scale, weighted by their precisions: the prior's
+    standard deviation is ``width`` times the share's spread; the median's is its frames' spread (MAD)
+    over the square root of their effective number, which the deviations' lag-1 autocorrelation sets
+    (white noise: every frame counts; a slow drift: about one). A drifting bone's median is as
+    wrong as the drift, and the prior then decides; noisy or exact bones keep their median.
+    Calibration subjects 9-10, severity 2: anchor drift -0.9 -> +12.7 % of the added MPJPE removed,
+    jitter unchanged (22.7 %), wrong anchors -2.1 -> -1.7 % (the README's table of choices).
+    """
+    x = np.asarray(lengths, np.float64)
+    median = np.median(x, axis=1)  # (B, n_bones)
+    if proportions is None:
+        return median
+    dev = x - median[:, None]
+    mad = 1.4826 * np.median(np.abs(dev), axis=1)
+    rho = np.clip((dev[:, 1:] * dev[:, :-1]).sum(1) / np.maximum((dev * dev).sum(1), 1e-18), 0.0, 0.999)
+    n_eff = np.maximum(1.0, x.shape[1] * (1 - rho) / (1 + rho))
+    own_sd = np.maximum(mad / np.sqrt(n_eff), 1e-9)
+    share = proportions.mean[None]
+    scale = (share * median).sum(1, keepdims=True) / (share * share).sum()  # least squares: long bones weigh most
+    prior_sd = np.maximum(width * scale * proportions.spread[None], 1e-9)
+    w_own, w_prior = own_sd ** -2, prior_sd ** -2
+    return (median * w_own + scale * share * w_prior) / (w_own + w_prior)
 
 
 def _project_lengths(x: np.ndarray, pairs: np.ndarray, target: np.ndarray, iterations: int) -> np.ndarray:

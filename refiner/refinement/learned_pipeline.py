@@ -271,13 +271,16 @@ def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
 def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
     clips = clips.copy()
-    rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance)  # the whole batch at once
+    prior = refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None
+    rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior)
+    lengths = ("the clip's median bone lengths" if prior is None else
+               "the clip's median bone lengths, drawn toward human proportions where they drift")
     for b, (report, variation) in enumerate(zip(reports, variations)):  # first the bones: not a motion flaw
         if variation > refiner.rigid_tolerance:
             clips[b] = rigid[b]
             report.changes.append({"start": 0, "stop": clips.shape[1], "step": "skeleton", "reason":
                                    f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
-                                   "0 %); every frame put back on the clip's median bone lengths"})
+                                   f"0 %); every frame put back on {lengths}"})
     rec = refiner.flaw_recognizer.predict(clips, actions)
     threshold = float(refiner.flaw_recognizer.threshold_)
     use = set(refiner.detect.split("+"))

@@ -21,7 +21,7 @@ from refiner.core.manifest import file_sha256, read_refiner_manifest, write_mani
 from refiner.core.motion import Motion
 from refiner.core.output_kind import like_input
 from refiner.core.skeleton_conversion import estimated_joints
-from refiner.core.skeletons import get_skeleton
+from refiner.core.skeletons import BoneProportions, get_skeleton
 from refiner.core.validation import check_joints
 from refiner.nn.training import resolve_device
 from refiner.refinement import concepts_pipeline, learned_pipeline
@@ -57,6 +57,8 @@ _PARTS = {
 _NO_DEVICE = ("anchor_concepts", "anchor_quality")
 #: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
 METHODS = ("learned", "concepts")
+#: Lengths of the rigid skeleton: the clip's medians drawn toward learned proportions, or the medians.
+RIGID_LENGTHS = ("proportions", "median")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 #: Thresholds a manifest's ``calibration`` entry may hold; they belong to the steps, which save them.
 _CALIBRATED = ("anchor_threshold", "transition_threshold", "transition_thresholds")
@@ -88,7 +90,11 @@ class Refiner:
         (default "classifier"); a flagged run needs ``min_run=2`` frames above the threshold and is widened
         by ``margin=2``, extended while the score stays above ``hysteresis=0.5`` of it; ``change_penalty=0.01``
         is the flaw probability a ``"select"`` candidate must gain per centimetre; a clip whose bone lengths
-        vary more than ``rigid_tolerance=0.005`` (std / mean; mocap: under 0.001 %) is put on its median ones.
+        vary more than ``rigid_tolerance=0.005`` (std / mean; mocap: under 0.001 %) is put back on rigid bones.
+    rigid_lengths : {"proportions", "median"}, optional
+        The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions
+        the weights learned (``manifest["learned"]["bone_proportions"]``; a drifting bone's median is as
+        wrong as its drift), or the medians alone. Default "proportions" when the weights have them.
     quality, anchor_method, transition_method, anchor_noise
         Options of the concepts method, see :mod:`refiner.refinement.concepts_pipeline`: ``quality`` in
         {"pose", "encoder"}, ``anchor_method`` in {"posterior", "concept"}, ``transition_method`` in
@@ -118,7 +124,8 @@ class Refiner:
                  flaw_denoiser=None, motion_infiller=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
-                 rigid_tolerance: float = 0.005, change_penalty: float = 0.01, hysteresis: float = 0.5,
+                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None,
+                 change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | str | None = "auto", manifest: dict | None = None):
         self.recognizer, self.anchor_refiner, self.anchor_concepts = recognizer, anchor_refiner, anchor_concepts
@@ -160,6 +167,13 @@ class Refiner:
             anchor_quality.threshold_ = float(calibration["anchor_threshold"])
         self.anchor_quality = anchor_quality
         self.transition_retimer = TransitionRetimer.from_calibration(calibration)
+        record = self.manifest.get("learned", {}).get("bone_proportions")
+        self.bone_proportions = BoneProportions.from_dict(record) if record else None
+        self.rigid_lengths = check_choice("rigid_lengths", rigid_lengths or (
+            "median" if self.bone_proportions is None else "proportions"), RIGID_LENGTHS)
+        if self.rigid_lengths == "proportions" and self.bone_proportions is None:
+            raise ValueError("rigid_lengths='proportions' needs the bone proportions of the weights' manifest "
+                             "(`learned.bone_proportions`), which these weights lack; use 'median'.")
 
     # ------------------------------------------------------------------ persistence
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.segmentation import segment
+from refiner.core.skeletons import BoneProportions
 from refiner.io.datasets import MotionDataset
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
@@ -163,7 +164,9 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
         log_path = Path(out) / "parts" / f"{name}.json"
         if log_path.is_file():
             info[name] = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"}
-    return install_learned(base, parts, out=out, info={"split": split, **info})
+    data = dataset.split(split)
+    proportions = BoneProportions.from_clips([m.joints for m in data.motions], data.motions[0].skeleton)
+    return install_learned(base, parts, out=out, info={"split": split, "bone_proportions": proportions.to_dict(), **info})
 
 
 def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all", clip_rate: float = CLIP_RATE) -> dict:
