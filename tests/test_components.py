@@ -195,3 +195,39 @@ def test_training_ends_on_the_best_or_the_last_weights(rng):
     with torch.no_grad():
         assert float(loss(best, {"x": x, "y": -y}, None)) == pytest.approx(min(vals), rel=1e-5)
         assert float(loss(last, {"x": x, "y": -y}, None)) == pytest.approx(vals[-1], rel=1e-5)
+
+
+def test_lower_triangles_pack_and_unpack(rng):
+    from refiner.core.serialization import pack_lower, unpack_lower
+
+    chol = np.tril(rng.normal(size=(3, 2, 5, 5)))
+    packed = pack_lower(chol)
+    assert packed.shape == (3, 2, 15)
+    np.testing.assert_array_equal(unpack_lower(packed), chol)
+    a = rng.normal(size=(4, 4))
+    cov = a @ a.T
+    np.testing.assert_array_equal(unpack_lower(pack_lower(cov), symmetric=True), cov)
+    with pytest.raises(ValueError, match="not the lower triangle"):
+        unpack_lower(np.zeros(7))
+
+
+@pytest.mark.real_data
+def test_shipped_anchor_quality_keeps_its_scores_in_half_the_bytes(humanact12, tmp_path):
+    """The shipped file stores the covariances' lower triangles; a full-matrix file (the old layout) still loads."""
+    from refiner.core.serialization import load_state, save_state
+    from refiner.refinement.anchor_quality import AnchorQuality
+    from refiner.refinement.pipeline import _WEIGHTS
+
+    path = _WEIGHTS / "humanact12-train" / "anchor_quality.safetensors"
+    tensors, metadata = load_state(path)
+    assert "covariances.lower" in tensors and "covariances" not in tensors
+    model = AnchorQuality.load(path)
+    np.testing.assert_array_equal(model.covariances_, np.swapaxes(model.covariances_, -1, -2))
+    full = {k: v for k, v in tensors.items() if k != "covariances.lower"}
+    full["covariances"] = model.covariances_.astype(np.float32)
+    save_state(tmp_path / "full.safetensors", full, metadata)
+    old = AnchorQuality.load(tmp_path / "full.safetensors")
+    poses = np.stack([humanact12[i].joints[10] for i in range(0, 1000, 100)])
+    actions = np.array([humanact12[i].action for i in range(0, 1000, 100)])
+    np.testing.assert_array_equal(old.score(poses, actions), model.score(poses, actions))
+    assert (tmp_path / "full.safetensors").stat().st_size > 1.8 * path.stat().st_size

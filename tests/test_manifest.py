@@ -43,6 +43,12 @@ def test_shipped_generator_manifest_carries_its_content_hash():
     assert manifest[CONTENT_KEY] == content_sha256(manifest) and set(paths) == set(GENERATOR_KINDS)
 
 
+def test_shipped_weights_stay_under_30_mb_in_all():
+    """Issue budget: every shipped file under ``refiner/weights`` (refiners, generators, evaluators) together."""
+    total = sum(p.stat().st_size for p in _WEIGHTS.rglob("*") if p.is_file())
+    assert total < 30e6, f"{total / 1e6:.2f} MB"
+
+
 @pytest.mark.parametrize("change", [
     lambda m: m["action_names"].reverse(),
     lambda m: m["calibration"].__setitem__("anchor_threshold", m["calibration"]["anchor_threshold"] + 1.0),

@@ -9,7 +9,7 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["save_state", "load_state", "FORMAT_VERSION", "pack_metadata", "check_metadata"]
+__all__ = ["save_state", "load_state", "FORMAT_VERSION", "pack_metadata", "check_metadata", "pack_lower", "unpack_lower"]
 
 FORMAT_VERSION = "1"
 
@@ -71,3 +71,27 @@ def check_metadata(path, metadata: Mapping[str, str], cls) -> tuple[dict, dict]:
     if version != FORMAT_VERSION:
         raise ValueError(f"{str(path)!r} has format version {version!r}, expected {FORMAT_VERSION!r}.")
     return json.loads(metadata["refiner.params"]), json.loads(metadata.get("refiner.fitted", "{}"))
+
+
+def pack_lower(a: np.ndarray) -> np.ndarray:
+    """The lower triangles of square matrices ``(..., n, n)`` as ``(..., n (n + 1) / 2)`` (row by row):
+    a Cholesky factor or a symmetric matrix stored in about half the bytes."""
+    a = np.asarray(a)
+    rows, cols = np.tril_indices(a.shape[-1])
+    return a[..., rows, cols]
+
+
+def unpack_lower(packed: np.ndarray, *, symmetric: bool = False) -> np.ndarray:
+    """Inverse of :func:`pack_lower`: ``(..., m)`` -> ``(..., n, n)``, zeros above the diagonal, or the
+    mirror of the lower triangle with ``symmetric``. Raises ValueError if ``m`` is not a triangular number."""
+    packed = np.asarray(packed)
+    m = packed.shape[-1]
+    n = int(round((np.sqrt(8 * m + 1) - 1) / 2))
+    if n * (n + 1) // 2 != m:
+        raise ValueError(f"{m} values are not the lower triangle of a square matrix.")
+    out = np.zeros(packed.shape[:-1] + (n, n), packed.dtype)
+    rows, cols = np.tril_indices(n)
+    out[..., rows, cols] = packed
+    if symmetric:
+        out[..., cols, rows] = packed
+    return out

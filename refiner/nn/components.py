@@ -9,7 +9,7 @@ import numpy as np
 import torch
 from sklearn.base import BaseEstimator
 
-from refiner.core.serialization import check_metadata, load_state, pack_metadata, save_state
+from refiner.core.serialization import check_metadata, load_state, pack_lower, pack_metadata, save_state, unpack_lower
 from refiner.core.validation import check_is_fitted
 from refiner.nn.training import TrainSchedule, resolve_device
 
@@ -27,7 +27,8 @@ class NetworkComponent(BaseEstimator):
     Subclasses implement ``_make_network(fitted: dict) -> nn.Module`` and list their non-network
     fitted attributes in ``_fitted_attributes`` (JSON values) and ``_fitted_arrays`` (numpy arrays);
     ``_optional_arrays`` are saved when fitted (float16 with ``half``, like the weights) and loaded
-    when in the file (state that only some hyper-parameter values fit).
+    when in the file (state that only some hyper-parameter values fit); those also in
+    ``_lower_triangular_arrays`` (Cholesky factors) are stored as their lower triangles.
     Their training settings are one hyper-parameter, ``schedule`` (a :class:`~refiner.nn.training.TrainSchedule`,
     saved as a dict); a subclass that still declares the schedule's fields one by one (``n_epochs``,
     ``batch_size``, ..., ``verbose``) is served too.
@@ -36,6 +37,7 @@ class NetworkComponent(BaseEstimator):
     _fitted_attributes: tuple[str, ...] = ()
     _fitted_arrays: tuple[str, ...] = ()
     _optional_arrays: tuple[str, ...] = ()
+    _lower_triangular_arrays: tuple[str, ...] = ()
 
     def _schedule(self) -> TrainSchedule:
         """The schedule ``fit`` trains with (``ValueError`` when ``schedule`` is not a TrainSchedule)."""
@@ -83,8 +85,11 @@ class NetworkComponent(BaseEstimator):
             v = v.detach().cpu().contiguous()
             tensors[f"network.{k}"] = v.half() if half and v.is_floating_point() else v
         tensors.update({f"array.{name}": np.asarray(getattr(self, name)) for name in self._fitted_arrays})
-        tensors.update({f"array.{name}": np.asarray(getattr(self, name), np.float16 if half else None)
-                        for name in self._optional_arrays if hasattr(self, name)})
+        for name in self._optional_arrays:
+            if hasattr(self, name):
+                value = np.asarray(getattr(self, name), np.float16 if half else None)
+                lower = name in self._lower_triangular_arrays  # zeros above the diagonal are not stored
+                tensors[f"array.{name}" + (".lower" if lower else "")] = pack_lower(value) if lower else value
         fitted = {name: _jsonable(getattr(self, name)) for name in self._fitted_attributes}
         save_state(path, tensors, pack_metadata(self, **fitted))
 
@@ -101,6 +106,8 @@ class NetworkComponent(BaseEstimator):
         for name in cls._optional_arrays:
             if f"array.{name}" in tensors:
                 setattr(obj, name, tensors[f"array.{name}"])
+            elif f"array.{name}.lower" in tensors:
+                setattr(obj, name, unpack_lower(tensors[f"array.{name}.lower"]))
         network = obj._make_network(fitted)
         state = {k[len("network."):]: torch.from_numpy(v.copy()).float() if v.dtype == np.float16 else torch.from_numpy(v.copy())
                  for k, v in tensors.items() if k.startswith("network.")}

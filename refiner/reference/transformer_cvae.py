@@ -155,6 +155,7 @@ class TransformerCVAEGenerator(JointsGenerator):
 
     _fitted_attributes = ("action_names_", "history_", "train_seconds_")
     _optional_arrays = ("prior_mean_", "prior_scale_")
+    _lower_triangular_arrays = ("prior_scale_",)
     _desc = "actor transformer CVAE"
 
     def __init__(self, d_model: int = 64, *, n_layers: int = 2, n_heads: int = 4, ffn_dim: int = 128, dropout: float = 0.0,

@@ -11,7 +11,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.mixture import GaussianMixture
 
-from refiner.core.serialization import check_metadata, load_state, pack_metadata, save_state
+from refiner.core.serialization import check_metadata, load_state, pack_lower, pack_metadata, save_state, unpack_lower
 from refiner.core.signal import smoothstep
 from refiner.core.skeletons import joint_bone_lengths, with_bone_lengths
 from refiner.core.validation import check_is_fitted, check_random_state
@@ -178,8 +178,10 @@ class AnchorQuality(BaseEstimator):
 
     def save(self, path) -> None:
         check_is_fitted(self, "weights_", msg=NOT_FITTED)
-        # float32 on disk halves the file; scores agree with float64 to ~1e-4 nats
-        arrays = {"weights": self.weights_, "means": self.means_, "covariances": self.covariances_, "lengths": self.lengths_}
+        # float32 on disk halves the file (scores agree with float64 to ~1e-4 nats); the symmetric
+        # covariances keep their lower triangles only
+        arrays = {"weights": self.weights_, "means": self.means_, "covariances.lower": pack_lower(self.covariances_),
+                  "lengths": self.lengths_}
         save_state(path, {k: np.asarray(v, dtype=np.float32) for k, v in arrays.items()},
                    pack_metadata(self, threshold_=self.threshold_))
 
@@ -188,6 +190,8 @@ class AnchorQuality(BaseEstimator):
         tensors, metadata = load_state(path)
         params, fitted = check_metadata(path, metadata, cls)
         obj = cls(**params)
+        if "covariances.lower" in tensors:
+            tensors["covariances"] = unpack_lower(tensors["covariances.lower"], symmetric=True)
         obj.weights_, obj.means_, obj.covariances_, obj.lengths_ = (
             tensors[k].astype(np.float64) for k in ("weights", "means", "covariances", "lengths"))
         obj.threshold_ = float(fitted["threshold_"])
