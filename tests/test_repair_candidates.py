@@ -77,6 +77,19 @@ def test_stall_retime_fixes_stalls_and_leaves_moving_runs(walks):
 
 
 @pytest.mark.real_data
+def test_a_rest_nothing_catches_up_with_is_not_retimed(walks):
+    """A clip that comes to rest at its end stops without a rush after it: no stall flaw, left alone;
+    the same stop followed by a rush (a frozen transition) is re-timed."""
+    m = walks[0].joints
+    rest = np.concatenate([m[:40], np.repeat(m[39:40], 12, 0)])  # moves, then holds still to the end
+    np.testing.assert_array_equal(stall_retime_run(rest, 30, len(rest), SKEL), rest)
+    assert not np.array_equal(stall_retime_run(rest, 30, len(rest), SKEL, rush=None), rest)  # the old rule re-timed it
+    frozen = frozen_transition(walks[0], 2, random_state=0)
+    lo, hi = _runs(frozen.mask)[0]
+    assert not np.array_equal(stall_retime_run(frozen.motion.joints, lo, hi, SKEL), frozen.motion.joints)
+
+
+@pytest.mark.real_data
 def test_stall_window_reaches_over_the_stall_and_the_rush(walks):
     flawed_growth, clean_growth, covered = [], [], []
     for i, m in enumerate(walks):

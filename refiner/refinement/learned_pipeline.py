@@ -89,6 +89,11 @@ _GROUP_NAMES = tuple(GROUPS)
 #:   (widened by 0 / 2 / 4 / 6: 57.3 / 58.9 / 50.6 / 44.5 %; rush 1.2 / 1.5 / 2 times the median speed:
 #:   48.6 / 50.6 / 49.6 % at widening 4); growing to the recognised anchors or to the flawed clip's own
 #:   segmentation anchors instead: 42.6 / 40.4 %; **+16.6 %** in all.
+#: - the rigid skeleton on bone lengths drawn toward learned proportions (``Refiner(rigid_lengths=)``):
+#:   anchor_drift -0.9 -> +12.6 %, wrong_anchor -2.1 -> -1.7 %, **+18.6 %** in all; then the stall
+#:   re-timing only where a rush follows the stop (``stall_retime_run(rush=1.5)``): every figure here
+#:   unchanged (its reason lies in the benchmark subjects: a time-warped clip that ends at rest was
+#:   re-timed over its rest, +4.7 cm; time_warp there -1.1 -> -0.4 %).
 TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet", 0), "pose": ("planted_feet", 0),
                  "noise": ("smooth", 0)}
 #: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
