@@ -193,6 +193,16 @@ def test_shipped_weights_know_bone_proportions():
     assert Refiner.pretrained("humanact12", split="train", rigid_lengths="median").rigid_lengths == "median"
     with pytest.raises(ValueError, match="rigid_lengths"):
         Refiner.pretrained("humanact12", split="train", rigid_lengths="mean")
+    record = model.bone_proportions.to_dict()
+    for bad in ({"mean": record["mean"]}, {"mean": record["mean"][:5], "spread": record["spread"]},
+                {"mean": [float("nan")] + record["mean"][1:], "spread": record["spread"]}):
+        with pytest.raises(ValueError, match="bone proportions"):
+            BoneProportions.from_dict(bad)
+    short = {"mean": record["mean"][:19], "spread": record["spread"][:19]}
+    with pytest.raises(ValueError, match="has 23"):
+        Refiner(**{p: getattr(model, p) for p in ("recognizer", "anchor_refiner", "transition_generator",
+                                                  "transition_refiner", "anchor_concepts", "anchor_quality")},
+                manifest={"learned": {"bone_proportions": short}})
 
 
 @pytest.mark.real_data

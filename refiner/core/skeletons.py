@@ -311,7 +311,16 @@ class BoneProportions:
 
     @classmethod
     def from_dict(cls, record: dict) -> "BoneProportions":
-        return cls(np.asarray(record["mean"], np.float64), np.asarray(record["spread"], np.float64))
+        """From :meth:`to_dict`'s record; ValueError unless both are equally long, finite, positive shares."""
+        try:
+            mean, spread = (np.asarray(record[k], np.float64) for k in ("mean", "spread"))
+        except (KeyError, TypeError, ValueError):
+            raise ValueError("bone proportions need numeric `mean` and `spread` lists.") from None
+        if (mean.ndim != 1 or mean.shape != spread.shape or not np.isfinite(mean).all() or not np.isfinite(spread).all()
+                or (mean <= 0).any() or (spread < 0).any()):
+            raise ValueError("bone proportions need equally long lists of positive `mean` and non-negative "
+                             "`spread` shares.")
+        return cls(mean, spread)
 
     def to_dict(self) -> dict:
         return {"mean": [float(v) for v in self.mean], "spread": [float(v) for v in self.spread]}

@@ -169,6 +169,10 @@ class Refiner:
         self.transition_retimer = TransitionRetimer.from_calibration(calibration)
         record = self.manifest.get("learned", {}).get("bone_proportions")
         self.bone_proportions = BoneProportions.from_dict(record) if record else None
+        n_bones = len(get_skeleton(skeleton).bones)
+        if self.bone_proportions is not None and self.bone_proportions.mean.shape != (n_bones,):
+            raise ValueError(f"the manifest's bone proportions have {self.bone_proportions.mean.size} bones; "
+                             f"skeleton {skeleton!r} has {n_bones}.")
         self.rigid_lengths = check_choice("rigid_lengths", rigid_lengths or (
             "median" if self.bone_proportions is None else "proportions"), RIGID_LENGTHS)
         if self.rigid_lengths == "proportions" and self.bone_proportions is None:
