@@ -130,3 +130,24 @@ def test_own_labels_refine_action_agnostic_short_clips_stay_and_errors_name_the_
     with pytest.raises(ValueError, match="rigid_tolerance"):
         Refiner.pretrained("uestc", rigid_tolerance=None)
     assert model.threads_for(u) == 1 and model.threads == "auto"
+
+
+@pytest.mark.real_data
+def test_converted_layouts_draw_drifting_bones_toward_their_own_proportions(held_out):
+    """The HumanAct12 weights carry proportions of the layouts they serve; a drifting uestc bone is drawn back."""
+    from refiner.core.skeletons import BoneProportions
+
+    model = Refiner.pretrained("uestc", split="train")
+    assert model.proportions.mean.shape == (17,) and model.base.rigid_lengths == "proportions"
+    assert Refiner.pretrained("humanml3d", split="train").proportions.mean.shape == (21,)
+    median = Refiner.pretrained("uestc", split="train", rigid_lengths="median")
+    assert median.proportions is None and median.base.rigid_lengths == "median"
+    x = convert(held_out[0].joints, "humanact12", "uestc").astype(np.float64)
+    wrist = get_skeleton("uestc").joint_names.index("right_wrist")
+    drift = x.copy()
+    drift[:, wrist] += np.linspace(0, 1, len(x))[:, None] * np.array([0.0, 0.06, 0.0])  # the forearm stretches by up to 6 cm
+    err = {name: np.linalg.norm(m.refine(drift.astype(np.float32)) - x, axis=-1).mean() for name, m in
+           (("proportions", model), ("median", median))}
+    assert err["proportions"] < err["median"], err
+    with pytest.raises(ValueError, match="one share per uestc bone"):
+        ConvertedRefiner(model.base, "uestc", proportions=BoneProportions(np.ones(5) / 5, np.zeros(5)))

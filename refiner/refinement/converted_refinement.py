@@ -17,7 +17,7 @@ import numpy as np
 from refiner.core.motion import Motion
 from refiner.core.output_kind import like_input
 from refiner.core.skeleton_conversion import convert, estimated_joints
-from refiner.core.skeletons import get_skeleton, rigid_skeleton
+from refiner.core.skeletons import BoneProportions, get_skeleton, rigid_skeleton
 from refiner.core.validation import check_joints
 from refiner.refinement.inputs import MIN_FRAMES, check_metres_each, thread_limits
 
@@ -42,8 +42,12 @@ class ConvertedRefiner:
         A registered skeleton that :func:`refiner.core.skeletons.convert` connects with ``base.skeleton``.
     rigid_tolerance : float, default=0.005
         The rigid-skeleton step runs here, on ``skeleton``'s own bones (a clip whose bones vary more
-        than this is put on its median lengths); ``base`` should not repeat it
+        than this is put back on rigid bones); ``base`` should not repeat it
         (``rigid_tolerance=inf``), since the joints the conversion estimates do not keep their lengths.
+    proportions : BoneProportions, optional
+        Human bone proportions in ``skeleton``'s layout, toward which drifting bones are drawn
+        (:func:`~refiner.core.skeletons.robust_bone_lengths`); None: the clip's medians. The converted
+        clip is put on rigid bones with ``base``'s own proportions when it uses them.
 
     Attributes
     ----------
@@ -54,7 +58,7 @@ class ConvertedRefiner:
         The bones the rigid-skeleton step judges and enforces (all but :data:`FLEXIBLE_BONES`).
     """
 
-    def __init__(self, base, skeleton: str, *, rigid_tolerance: float = 0.005):
+    def __init__(self, base, skeleton: str, *, rigid_tolerance: float = 0.005, proportions: BoneProportions | None = None):
         self.base = base
         if isinstance(rigid_tolerance, bool) or not isinstance(rigid_tolerance, (int, float)) or rigid_tolerance < 0:
             raise ValueError(f"`rigid_tolerance` must be a number >= 0; got {rigid_tolerance!r}.")
@@ -67,6 +71,10 @@ class ConvertedRefiner:
         self.rigid_bones = np.array([frozenset((skel.joint_names[a], skel.joint_names[b])) not in flexible
                                      for a, b in skel.bones])
         estimated_joints(self.skeleton, base.skeleton)  # refuses skeletons the conversion cannot reach
+        if proportions is not None and proportions.mean.shape != (len(skel.bones),):
+            raise ValueError(f"`proportions` must have one share per {self.skeleton} bone ({len(skel.bones)}); "
+                             f"got {proportions.mean.size}.")
+        self.proportions = proportions
 
     def __repr__(self) -> str:
         return f"ConvertedRefiner({self.skeleton!r} through {self.base.skeleton!r})"
@@ -107,12 +115,13 @@ class ConvertedRefiner:
             raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
         known = [a if isinstance(a, str) and a in self.action_names else None for a in actions]
         long_enough = clips.shape[1] >= MIN_FRAMES  # shorter clips come back exactly as given
-        rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
-                 else (c, 0.0) for c in clips]
+        rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones,
+                                proportions=self.proportions) if long_enough else (c, 0.0) for c in clips]
         given = np.stack([r[0] for r in rigid]).astype(np.float32)
         # the joints the conversion estimates do not keep their lengths, and the flaw classifier reads
         # bone-length changes as flaws (it flagged every frame of converted clean clips): make them rigid
-        inner = np.stack([rigid_skeleton(c, self.base.skeleton, self.rigid_tolerance)[0]
+        inner_prior = self.base.bone_proportions if getattr(self.base, "rigid_lengths", None) == "proportions" else None
+        inner = np.stack([rigid_skeleton(c, self.base.skeleton, self.rigid_tolerance, proportions=inner_prior)[0]
                           for c in convert(given, self.skeleton, self.base.skeleton)]).astype(np.float32)
         if batched:
             refined, reports = self.base.refine(inner, action=known, mode=mode, return_report=True)
@@ -132,8 +141,9 @@ class ConvertedRefiner:
             if variation > self.rigid_tolerance:
                 report.changes.insert(0, {"start": 0, "stop": x.shape[-3], "step": "skeleton", "reason":
                                           f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
-                                          f"0 %); every frame put back on the clip's median {self.skeleton} bone lengths "
-                                          "(bones that span a bending chain left free)"})
+                                          f"0 %); every frame put back on the clip's median {self.skeleton} bone lengths"
+                                          + (", drawn toward human proportions where they drift" if self.proportions
+                                             is not None else "") + " (bones that span a bending chain left free)"})
         out = out if batched else out[0]
         result = like_input(out, seq, x)
         if return_report:

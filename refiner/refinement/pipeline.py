@@ -343,7 +343,10 @@ def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict
         kwargs = dict(kwargs)
         tolerance = kwargs.pop("rigid_tolerance", 0.005)  # on the clip's own bones, not the estimated ones
         base = _shared_pretrained(cls, "humanact12", split, device, {**kwargs, "rigid_tolerance": float("inf")})
-        return ConvertedRefiner(base, skeleton, rigid_tolerance=tolerance)
+        record = base.manifest.get("learned", {}).get("converted_bone_proportions", {}).get(get_skeleton(skeleton).name)
+        use = record is not None and base.rigid_lengths == "proportions"
+        return ConvertedRefiner(base, skeleton, rigid_tolerance=tolerance,
+                                proportions=BoneProportions.from_dict(record) if use else None)
     if not (folder / "manifest.json").is_file():
         known = [f"{w['folder']} ({w['skeleton']}, {w['split']})" for w in shipped_weights()]
         raise ValueError(f"no shipped weights for skeleton {skeleton!r}, split {split!r}; shipped: "

@@ -15,7 +15,7 @@ import numpy as np
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.segmentation import segment
-from refiner.core.skeletons import BoneProportions
+from refiner.core.skeletons import BoneProportions, convert
 from refiner.io.datasets import MotionDataset
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
@@ -24,8 +24,10 @@ from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
-           "calibrate_learned", "calibration_split", "CLIP_RATE"]
+           "calibrate_learned", "calibration_split", "CLIP_RATE", "bone_proportion_records", "CONVERTED_SKELETONS"]
 
+#: Layouts refined through HumanAct12 weights (``Refiner.pretrained`` gives them a ConvertedRefiner).
+CONVERTED_SKELETONS = ("uestc", "humanml3d")
 #: Share of held-out real clips each detector may flag (both together: at most twice this).
 CLIP_RATE = 0.03
 
@@ -164,9 +166,21 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
         log_path = Path(out) / "parts" / f"{name}.json"
         if log_path.is_file():
             info[name] = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"}
-    data = dataset.split(split)
-    proportions = BoneProportions.from_clips([m.joints for m in data.motions], data.motions[0].skeleton)
-    return install_learned(base, parts, out=out, info={"split": split, "bone_proportions": proportions.to_dict(), **info})
+    return install_learned(base, parts, out=out, info={"split": split, **bone_proportion_records(dataset.split(split)),
+                                                        **info})
+
+
+def bone_proportion_records(data: MotionDataset) -> dict:
+    """``bone_proportions`` of the clips' own skeleton and, for HumanAct12 clips, ``converted_bone_proportions``
+    of every layout :class:`~refiner.refinement.converted_refinement.ConvertedRefiner` serves through them
+    (the clips converted there), as the manifest's ``learned`` entry keeps them."""
+    clips, skeleton = [m.joints for m in data.motions], data.motions[0].skeleton
+    record = {"bone_proportions": BoneProportions.from_clips(clips, skeleton).to_dict()}
+    if skeleton == "humanact12":
+        record["converted_bone_proportions"] = {
+            name: BoneProportions.from_clips([convert(c, skeleton, name) for c in clips], name).to_dict()
+            for name in CONVERTED_SKELETONS}
+    return record
 
 
 def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all", clip_rate: float = CLIP_RATE) -> dict:
