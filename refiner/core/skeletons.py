@@ -1,4 +1,5 @@
-"""Skeleton registry: joint names, parents and coordinate conventions of every supported layout.
+"""Skeleton registry: joint names, parents and coordinate conventions of every supported layout;
+bone lengths, and the rigid-skeleton step with the human bone proportions it may lean on.
 
 Tables follow ``generator_formats.md`` section 1 (HumanAct12 / SMPL 24, NTU-VIBE 18 used for UESTC,
 HumanML3D 22) and Action2Motion's CMU-Mocap chain (20 joints).
@@ -341,7 +342,7 @@ def robust_bone_lengths(lengths: np.ndarray, proportions: BoneProportions | None
     over the square root of their effective number, which the deviations' lag-1 autocorrelation sets
     (white noise: every frame counts; a slow drift: about one). A drifting bone's median is as
     wrong as the drift, and the prior then decides; noisy or exact bones keep their median.
-    Calibration subjects 9-10, severity 2: anchor drift -0.9 -> +12.7 % of the added MPJPE removed,
+    Calibration subjects 9-10, severity 2: anchor drift -0.9 -> +12.6 % of the added MPJPE removed,
     jitter unchanged (22.7 %), wrong anchors -2.1 -> -1.7 % (the README's table of choices).
     """
     x = np.asarray(lengths, np.float64)
