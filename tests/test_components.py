@@ -124,11 +124,19 @@ def test_schedule_is_one_parameter_and_old_flat_files_fold_into_it(synthetic, tm
     for cls in (*CLASSES.values(), FlawClassifier, FlawRecognizer, FlawRepairer, FlawDenoiser):
         params = cls().get_params()
         assert isinstance(params["schedule"], TrainSchedule) and not {"n_epochs", "device", "verbose"} & set(params)
-    with safe_open(str(weights / "recognizer.safetensors"), "np") as f:
-        flat = json.loads(f.metadata()["refiner.params"])
-    assert flat["n_epochs"] == 600 and "schedule" not in flat  # written before the schedule was one parameter
-    schedule = AnchorRecognizer.load(weights / "recognizer.safetensors").schedule
-    assert (schedule.n_epochs, schedule.patience, schedule.max_seconds, schedule.progress) == (600, 40, 100.0, True)
+    from refiner.core.serialization import load_state, save_state
+
+    tensors, metadata = load_state(weights / "recognizer.safetensors")
+    params = json.loads(metadata["refiner.params"])
+    schedule = params.pop("schedule")  # as the files were written before the schedule was one parameter:
+    flat = {**params, **{k: v for k, v in schedule.items() if k != "progress"}, "verbose": schedule["progress"]}
+    old = tmp_path / "flat_recognizer.safetensors"
+    save_state(old, tensors, {**metadata, "refiner.params": json.dumps(flat)})
+    with safe_open(str(old), "np") as f:
+        assert "schedule" not in json.loads(f.metadata()["refiner.params"])
+    loaded = AnchorRecognizer.load(old).schedule
+    assert loaded == AnchorRecognizer.load(weights / "recognizer.safetensors").schedule
+    assert (loaded.n_epochs, loaded.patience, loaded.max_seconds, loaded.progress) == (600, 40, 100.0, True)
     with pytest.raises(ValueError, match="`schedule` must be"):
         AnchorRecognizer(schedule={"n_epochs": 2}).fit(*_recognizer_data(synthetic))
 

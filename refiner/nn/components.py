@@ -27,8 +27,9 @@ class NetworkComponent(BaseEstimator):
     Subclasses implement ``_make_network(fitted: dict) -> nn.Module`` and list their non-network
     fitted attributes in ``_fitted_attributes`` (JSON values) and ``_fitted_arrays`` (numpy arrays);
     ``_optional_arrays`` are saved when fitted (float16 with ``half``, like the weights) and loaded
-    when in the file (state that only some hyper-parameter values fit); those also in
-    ``_lower_triangular_arrays`` (Cholesky factors) are stored as their lower triangles.
+    when in the file (state that only some hyper-parameter values fit). Arrays in
+    ``_lower_triangular_arrays`` (Cholesky factors) or ``_symmetric_arrays`` (covariances) are stored
+    as their lower triangles.
     Their training settings are one hyper-parameter, ``schedule`` (a :class:`~refiner.nn.training.TrainSchedule`,
     saved as a dict); a subclass that still declares the schedule's fields one by one (``n_epochs``,
     ``batch_size``, ..., ``verbose``) is served too.
@@ -38,6 +39,7 @@ class NetworkComponent(BaseEstimator):
     _fitted_arrays: tuple[str, ...] = ()
     _optional_arrays: tuple[str, ...] = ()
     _lower_triangular_arrays: tuple[str, ...] = ()
+    _symmetric_arrays: tuple[str, ...] = ()
 
     def _schedule(self) -> TrainSchedule:
         """The schedule ``fit`` trains with (``ValueError`` when ``schedule`` is not a TrainSchedule)."""
@@ -84,12 +86,12 @@ class NetworkComponent(BaseEstimator):
         for k, v in self.network_.state_dict().items():
             v = v.detach().cpu().contiguous()
             tensors[f"network.{k}"] = v.half() if half and v.is_floating_point() else v
-        tensors.update({f"array.{name}": np.asarray(getattr(self, name)) for name in self._fitted_arrays})
-        for name in self._optional_arrays:
-            if hasattr(self, name):
-                value = np.asarray(getattr(self, name), np.float16 if half else None)
-                lower = name in self._lower_triangular_arrays  # zeros above the diagonal are not stored
-                tensors[f"array.{name}" + (".lower" if lower else "")] = pack_lower(value) if lower else value
+        arrays = {name: np.asarray(getattr(self, name)) for name in self._fitted_arrays}
+        arrays.update({name: np.asarray(getattr(self, name), np.float16 if half else None)
+                       for name in self._optional_arrays if hasattr(self, name)})
+        for name, value in arrays.items():
+            lower = name in self._lower_triangular_arrays + self._symmetric_arrays  # the rest follows from it
+            tensors[f"array.{name}" + (".lower" if lower else "")] = pack_lower(value) if lower else value
         fitted = {name: _jsonable(getattr(self, name)) for name in self._fitted_attributes}
         save_state(path, tensors, pack_metadata(self, **fitted))
 
@@ -101,13 +103,13 @@ class NetworkComponent(BaseEstimator):
         obj = cls(**cls._init_params(params))
         for name in cls._fitted_attributes:
             setattr(obj, name, fitted[name])
-        for name in cls._fitted_arrays:
-            setattr(obj, name, tensors[f"array.{name}"])
-        for name in cls._optional_arrays:
-            if f"array.{name}" in tensors:
+        for name in cls._fitted_arrays + cls._optional_arrays:
+            if f"array.{name}" in tensors:  # files before the packed layout hold whole matrices
                 setattr(obj, name, tensors[f"array.{name}"])
             elif f"array.{name}.lower" in tensors:
-                setattr(obj, name, unpack_lower(tensors[f"array.{name}.lower"]))
+                setattr(obj, name, unpack_lower(tensors[f"array.{name}.lower"], symmetric=name in cls._symmetric_arrays))
+            elif name in cls._fitted_arrays:
+                raise ValueError(f"{str(path)!r} lacks the fitted array {name!r} of a {cls.__name__}.")
         network = obj._make_network(fitted)
         state = {k[len("network."):]: torch.from_numpy(v.copy()).float() if v.dtype == np.float16 else torch.from_numpy(v.copy())
                  for k, v in tensors.items() if k.startswith("network.")}

@@ -24,7 +24,7 @@ def gmm_log_likelihood(features: np.ndarray, weights: np.ndarray, means: np.ndar
     """Log-likelihood ``(N,)`` of features ``(N, D)`` under a full-covariance Gaussian mixture."""
     x = np.asarray(features, dtype=np.float64)
     logs = []
-    for w, mu, cov in zip(weights, means, covariances):
+    for w, mu, cov in zip(np.asarray(weights, np.float64), np.asarray(means, np.float64), np.asarray(covariances, np.float64)):
         chol = np.linalg.cholesky(cov)
         z = np.linalg.solve(chol, (x - mu).T)  # (D, N)
         logdet = 2.0 * np.log(np.diag(chol)).sum()

