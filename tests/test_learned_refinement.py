@@ -23,7 +23,7 @@ def tiny_learned(humanact12, tmp_path_factory):
 
     pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[::15][:6]]  # many subjects
     out = tmp_path_factory.mktemp("tiny_learned")
-    for optional in ("flaw_denoiser", "motion_infiller"):  # the optional parts, installed with the others
+    for optional in ("flaw_denoiser", "motion_infiller", "timing_estimator"):  # optional parts, installed with the others
         assert train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN,
                                      only=optional) is None
     refiner = train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN)
@@ -42,12 +42,31 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     again = Refiner.load(out)
     assert again.flaw_denoiser is not None and again.flaw_denoiser.skeleton_ == "humanact12"
     assert again.motion_infiller is not None and again.motion_infiller.n_joints_ == 24
+    assert again.timing_estimator is not None and again.retiming == "estimated"
+    assert np.isfinite(again.timing_estimator.threshold_)
+    assert again.manifest["learned"]["timing_threshold_frames"] == pytest.approx(again.timing_estimator.threshold_)
+    flagged = Refiner.load(out, retiming="flagged")
+    flagged.timing_estimator.threshold_ = 0.0  # every frame passes: the estimated step would re-time all of them
+    clip = humanact12[10].joints[:50]
+    _, report = flagged.refine(clip, return_report=True)
+    assert not any(c.get("repair") == "estimated_retime" for c in report.changes)
+    again.timing_estimator.threshold_ = 0.0
+    _, report = again.refine(clip, return_report=True)
+    assert any(c.get("repair") == "estimated_retime" for c in report.changes)
+    _, report = again.refine(clip, mode="anchor", return_report=True)  # a transition step: not for anchors alone
+    assert not any(c.get("repair") == "estimated_retime" for c in report.changes)
+    with pytest.raises(ValueError, match="retiming='estimated' needs a `timing_estimator`"):
+        Refiner.load(out, retiming="estimated").__class__(
+            **{p: getattr(again, p) for p in ("recognizer", "anchor_refiner", "transition_generator",
+                                              "transition_refiner", "anchor_concepts", "anchor_quality")},
+            retiming="estimated")
     x = humanact12[10].joints[:50]
     np.testing.assert_allclose(again.flaw_recognizer.predict(x[None])["flaw"],
                                refiner.flaw_recognizer.predict(x[None])["flaw"], atol=1e-3)  # float16 weights
     before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
     parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
-    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "flaw_denoiser", "motion_infiller"}
+    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "flaw_denoiser", "motion_infiller",
+                          "timing_estimator"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
 
 

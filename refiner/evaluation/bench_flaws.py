@@ -74,8 +74,9 @@ def flaw_records(clips, refiners: dict, *, severities=(2,), model=None, families
             flawed = [corrupt(m, family, severity, random_state=i, segmentation=segs[i], donors=donors[i])
                       for i, m in enumerate(clips)]
             base = None
-            oracles = [o for o in ORACLES if o not in _ORACLE_PARTS or getattr(model, _ORACLE_PARTS[o]) is not None]
-            names = list(refiners) + (oracles if model is not None else [])
+            oracles = [o for o in ORACLES if model is not None and
+                       (o not in _ORACLE_PARTS or getattr(model, _ORACLE_PARTS[o]) is not None)]
+            names = list(refiners) + oracles
             for name in names:
                 if name in ORACLES:
                     outs = [_oracle(name, model, c.motion.numpy(), c.mask, m.action) for c, m in zip(flawed, clips)]

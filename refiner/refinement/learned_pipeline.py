@@ -30,6 +30,7 @@ from refiner.core.skeletons import get_skeleton, rigid_skeleton
 from refiner.refinement.anchor_recognition import anchor_peaks
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
+from refiner.refinement.timing_estimation import estimated_retiming
 from refiner.refinement.report import RefinementReport, start_reports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
 from refiner.refinement.training_flaws import GROUPS
@@ -286,6 +287,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
             report.changes.append({"start": 0, "stop": clips.shape[1], "step": "skeleton", "reason":
                                    f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
                                    f"0 %); every frame put back on {lengths}"})
+    clips = estimated_retiming(refiner, clips, reports, mode)  # timing first: detection then sees it fixed
     rec = refiner.flaw_recognizer.predict(clips, actions)
     threshold = float(refiner.flaw_recognizer.threshold_)
     use = set(refiner.detect.split("+"))

@@ -37,6 +37,7 @@ from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.report import RefinementReport
 from refiner.refinement.splicing import project_bone_lengths, splice
 from refiner.refinement.transition_refinement import TransitionRefiner
+from refiner.refinement.timing_estimation import TimingEstimator
 from refiner.refinement.transition_retiming import TransitionRetimer
 
 __all__ = ["Refiner", "RefinementReport", "refine", "MODES", "splice", "project_bone_lengths"]
@@ -53,12 +54,16 @@ _PARTS = {
     "flaw_classifier": FlawClassifier,
     "flaw_denoiser": FlawDenoiser,
     "motion_infiller": MotionInfiller,
+    "timing_estimator": TimingEstimator,
 }
 _NO_DEVICE = ("anchor_concepts", "anchor_quality")
 #: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
 METHODS = ("learned", "concepts")
 #: Lengths of the rigid skeleton: the clip's medians drawn toward learned proportions, or the medians.
 RIGID_LENGTHS = ("proportions", "median")
+#: Timing flaws: the timing estimator's runs re-timed first, then flagged stalls (``"estimated"``), or only
+#: the stalls in runs the flaw detector flags as timing (``"flagged"``, the release before the estimator).
+RETIMING = ("estimated", "flagged")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 #: Thresholds a manifest's ``calibration`` entry may hold; they belong to the steps, which save them.
 _CALIBRATED = ("anchor_threshold", "transition_threshold", "transition_thresholds")
@@ -91,6 +96,11 @@ class Refiner:
         by ``margin=2``, extended while the score stays above ``hysteresis=0.5`` of it; ``change_penalty=0.01``
         is the flaw probability a ``"select"`` candidate must gain per centimetre; a clip whose bone lengths
         vary more than ``rigid_tolerance=0.005`` (std / mean; mocap: under 0.001 %) is put back on rigid bones.
+    timing_estimator : TimingEstimator, optional
+        The learned re-timing step (:mod:`refiner.refinement.timing_estimation`).
+    retiming : {"estimated", "flagged"}, optional
+        ``"estimated"`` (default when there is a ``timing_estimator``): the runs it finds are re-timed before
+        detection; ``"flagged"``: only stalls in runs the flaw detector flags as timing.
     rigid_lengths : {"proportions", "median"}, optional
         The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions
         the weights learned (``manifest["learned"]["bone_proportions"]``; a drifting bone's median is as
@@ -121,17 +131,17 @@ class Refiner:
 
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
                  anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None,
-                 flaw_denoiser=None, motion_infiller=None, *,
+                 flaw_denoiser=None, motion_infiller=None, timing_estimator=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
-                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None,
+                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, retiming: str | None = None,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | str | None = "auto", manifest: dict | None = None):
         self.recognizer, self.anchor_refiner, self.anchor_concepts = recognizer, anchor_refiner, anchor_concepts
         self.transition_generator, self.transition_refiner = transition_generator, transition_refiner
         self.flaw_recognizer, self.flaw_repairer, self.flaw_classifier = flaw_recognizer, flaw_repairer, flaw_classifier
-        self.flaw_denoiser, self.motion_infiller = flaw_denoiser, motion_infiller
+        self.flaw_denoiser, self.motion_infiller, self.timing_estimator = flaw_denoiser, motion_infiller, timing_estimator
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
         if self.method == "learned" and not learned:
@@ -175,6 +185,10 @@ class Refiner:
                              f"skeleton {skeleton!r} has {n_bones}.")
         self.rigid_lengths = check_choice("rigid_lengths", rigid_lengths or (
             "median" if self.bone_proportions is None else "proportions"), RIGID_LENGTHS)
+        self.retiming = check_choice("retiming", retiming or ("flagged" if timing_estimator is None else "estimated"),
+                                     RETIMING)
+        if self.retiming == "estimated" and timing_estimator is None:
+            raise ValueError("retiming='estimated' needs a `timing_estimator`, which these weights lack; use 'flagged'.")
         if self.rigid_lengths == "proportions" and self.bone_proportions is None:
             raise ValueError("rigid_lengths='proportions' needs the bone proportions of the weights' manifest "
                              "(`learned.bone_proportions`), which these weights lack; use 'median'.")

@@ -22,10 +22,15 @@ from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
+from refiner.refinement.timing_estimation import TimingEstimator
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
            "calibrate_learned", "calibration_split", "CLIP_RATE", "bone_proportion_records", "CONVERTED_SKELETONS"]
 
+#: Share of held-out real clips the timing estimator may re-time: it changes frames unverified, before
+#: detection. Calibration subjects 9-10 (mean of the 7 families removed): 3 / 2 / 1 % of clean clips
+#: (thresholds 1.8 / 2.8 / 3.8 frames) gave 19.0 / 19.5 (2.5 frames) / 19.5 % (3.5 frames), 18.6 without it.
+TIMING_CLIP_RATE = 0.01
 #: Layouts refined through HumanAct12 weights (``Refiner.pretrained`` gives them a ConvertedRefiner).
 CONVERTED_SKELETONS = ("uestc", "humanml3d")
 #: Share of held-out real clips each detector may flag (both together: at most twice this).
@@ -51,10 +56,14 @@ LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer")
 #: Parts trained only when asked (``only=``): the denoiser and the motion in-filler serve options of the
 #: refiner (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
 #: they are calibrated and installed with the others.
-OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller")
+OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller", "timing_estimator")
+#: The timing estimator's settings (about 30 minutes on one CPU core) and its tiny test version.
+TIMING_CONFIGS = {"default": dict(schedule=dict()),
+                  "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
-            "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller}
-_CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": CORRECTION_CONFIGS, "motion_infiller": CORRECTION_CONFIGS}
+            "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator}
+_CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": CORRECTION_CONFIGS, "motion_infiller": CORRECTION_CONFIGS,
+            "timing_estimator": TIMING_CONFIGS}
 
 
 def calibration_split(subjects) -> np.ndarray:
@@ -108,7 +117,7 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         cfg = dict(_CONFIGS.get(name, LEARNED_CONFIGS)[config])
         schedule = replace(cls().schedule, **cfg.pop("schedule"), **run)
         est = cls(**cfg, schedule=schedule, random_state=random_state)
-        if name in ("flaw_classifier", "flaw_denoiser", "motion_infiller"):  # action-agnostic: clips alone
+        if name in ("flaw_classifier", "flaw_denoiser", "motion_infiller", "timing_estimator"):  # action-agnostic
             est.fit(pick(fit_idx)[0], skeleton=skeleton, validation=pick(cal_idx)[0],
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         elif name == "flaw_recognizer":
@@ -142,11 +151,15 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.flaw_repairer = parts["flaw_repairer"]
     refiner.flaw_denoiser = parts.get("flaw_denoiser")
     refiner.motion_infiller = parts.get("motion_infiller")
+    refiner.timing_estimator = parts.get("timing_estimator")
+    refiner.retiming = "estimated" if refiner.timing_estimator is not None else "flagged"
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
                                    "classifier_threshold": float(parts["flaw_classifier"].threshold_),
                                    "correction_threshold_m": float(parts["flaw_repairer"].correction_threshold_),
                                    **({"denoiser_threshold_m": float(parts["flaw_denoiser"].threshold_)}
-                                      if parts.get("flaw_denoiser") is not None else {})}
+                                      if parts.get("flaw_denoiser") is not None else {}),
+                                   **({"timing_threshold_frames": float(parts["timing_estimator"].threshold_)}
+                                      if parts.get("timing_estimator") is not None else {})}
     refiner.save(out or folder, half=True)
     return Refiner.load(out or folder)
 
@@ -194,4 +207,6 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
             "correction_threshold_m": parts["flaw_repairer"].calibrate(clips, actions, clip_rate=clip_rate),
             **({"denoiser_threshold_m": parts["flaw_denoiser"].calibrate(clips, clip_rate=clip_rate)}
                if "flaw_denoiser" in parts else {}),
+            **({"timing_threshold_frames": parts["timing_estimator"].calibrate(clips, clip_rate=TIMING_CLIP_RATE)}
+               if "timing_estimator" in parts else {}),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}
