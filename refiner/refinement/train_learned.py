@@ -28,8 +28,8 @@ __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned"
            "calibrate_learned", "calibration_split", "CLIP_RATE", "bone_proportion_records", "CONVERTED_SKELETONS"]
 
 #: Share of held-out real clips the timing estimator may re-time: it changes frames unverified, before
-#: detection. Calibration subjects 9-10 (mean of the 7 families removed): 3 / 2 / 1 % of clean clips
-#: (thresholds 1.8 / 2.8 / 3.8 frames) gave 19.0 / 19.5 (2.5 frames) / 19.5 % (3.5 frames), 18.6 without it.
+#: detection. Calibration subjects 9-10 (mean of the 7 families removed): thresholds 1.8 / 2.5 / 3.5 /
+#: 3.8 frames (1.8: 3 % of clean clips; 3.8: 1 %) gave 19.0 / 19.5 / 19.5 / 19.8 %, 18.6 without it.
 TIMING_CLIP_RATE = 0.01
 #: Layouts refined through HumanAct12 weights (``Refiner.pretrained`` gives them a ConvertedRefiner).
 CONVERTED_SKELETONS = ("uestc", "humanml3d")
