@@ -51,8 +51,9 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     _, report = flagged.refine(clip, return_report=True)
     assert not any(c.get("repair") == "estimated_retime" for c in report.changes)
     again.timing_estimator.threshold_ = 0.0
-    _, report = again.refine(clip, return_report=True)
+    retimed, report = again.refine(clip, return_report=True)
     assert any(c.get("repair") == "estimated_retime" for c in report.changes)
+    assert bone_length_variation(retimed) < 1e-3  # re-sampled frames go back on the clip's bone lengths
     _, report = again.refine(clip, mode="anchor", return_report=True)  # a transition step: not for anchors alone
     assert not any(c.get("repair") == "estimated_retime" for c in report.changes)
     with pytest.raises(ValueError, match="retiming='estimated' needs a `timing_estimator`"):

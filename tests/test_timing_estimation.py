@@ -68,3 +68,19 @@ def test_unfitted_estimator_says_so():
         TimingEstimator().offsets(np.zeros((1, 20, 24, 3), np.float32))
     with pytest.raises(ValueError, match="at least 8 frames"):
         TimingEstimator().fit([np.zeros((5, 24, 3))])
+
+
+def test_run_ends_stay_and_short_clips_find_their_runs():
+    """A run's last frame is kept even when estimated source times pile up on it; runs on clips shorter
+    than the widening land where the offsets are; offsets of another length are refused."""
+    x = np.arange(30, dtype=np.float64)[:, None, None] * np.ones((1, 2, 3))  # one joint pair moving 1 per frame
+    d = np.zeros(30)
+    d[10:16], d[16:19] = [1, 2, 3, 4, 4, 3], [2, 2, 1]
+    out, runs = retime_by_offsets(x, d, 3.0, widen=3)
+    assert runs == [(9, 20)] and out[19, 0, 0] == 19 and np.array_equal(out[20:], x[20:])
+    for n, expected in ((5, (1, 5)), (6, (2, 6)), (12, (8, 12))):
+        d = np.zeros(n)
+        d[-1] = 5.0
+        assert retime_by_offsets(x[:n], d, 1.0, widen=3)[1] == [expected]
+    with pytest.raises(ValueError, match="one value per frame"):
+        retime_by_offsets(x, np.zeros(29), 1.0)

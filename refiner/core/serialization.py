@@ -77,6 +77,8 @@ def pack_lower(a: np.ndarray) -> np.ndarray:
     """The lower triangles of square matrices ``(..., n, n)`` as ``(..., n (n + 1) / 2)`` (row by row):
     a Cholesky factor or a symmetric matrix stored in about half the bytes."""
     a = np.asarray(a)
+    if a.ndim < 2 or a.shape[-1] != a.shape[-2]:
+        raise ValueError(f"pack_lower needs square matrices (..., n, n); got shape {a.shape}.")
     rows, cols = np.tril_indices(a.shape[-1])
     return a[..., rows, cols]
 

@@ -346,9 +346,13 @@ def robust_bone_lengths(lengths: np.ndarray, proportions: BoneProportions | None
     jitter unchanged (22.7 %), wrong anchors -2.1 -> -1.7 % (the README's table of choices).
     """
     x = np.asarray(lengths, np.float64)
+    if x.ndim != 3:
+        raise ValueError(f"`lengths` must be (B, T, n_bones); got shape {x.shape}.")
     median = np.median(x, axis=1)  # (B, n_bones)
     if proportions is None:
         return median
+    if proportions.mean.shape != (x.shape[-1],):
+        raise ValueError(f"`proportions` has {proportions.mean.size} bones; the lengths have {x.shape[-1]}.")
     dev = x - median[:, None]
     mad = 1.4826 * np.median(np.abs(dev), axis=1)
     rho = np.clip((dev[:, 1:] * dev[:, :-1]).sum(1) / np.maximum((dev * dev).sum(1), 1e-18), 0.0, 0.999)

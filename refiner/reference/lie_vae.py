@@ -268,6 +268,8 @@ class LieVAEGenerator(ReferenceGenerator):
         position (metres) and 23 axis-angle vectors (rad), Action2Motion's Lie layout; decode with
         :meth:`to_motions` (or the ``action2motion`` adapter with ``representation="lie"`` and
         ``reference=reference_``)."""
+        if isinstance(self.guidance, bool) or not isinstance(self.guidance, (int, float)) or not np.isfinite(self.guidance):
+            raise ValueError(f"`guidance` must be a finite number; got {self.guidance!r}.")
         noise = normal_noise(rng, (len(actions), self.n_frames, self.latent_dim), actions)
         return net.generate(actions, noise, self.guidance).cpu().numpy().astype(np.float32)
 

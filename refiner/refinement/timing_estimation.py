@@ -17,10 +17,10 @@ An option, not in the shipped weights (``motion-refiner train --learned --only t
 minutes on one CPU core, then ``train --learned`` assembles it; a refiner with it re-times first,
 ``Refiner(retiming="estimated")``). Measured with the train-split weights, its threshold set on the clean
 clips of subjects 9-10 (1 % re-timed, 3.8 frames): on those subjects the 7 benchmark families lose
-19.8 % of their added MPJPE instead of 18.6 % (time_warp -0.1 -> +6.8, frozen 58.9 -> 62.2, reversed
-0.0 -> +0.8, foot_sliding 37.8 -> 36.0); on the benchmark subjects 11-12 21.4 % instead of 20.2 %
-(time_warp -0.4 -> +5.7, frozen 53.4 -> 64.5, but jitter 23.1 -> 20.7, reversed -0.0 -> -2.2,
-foot_sliding 53.8 -> 50.3), clean clips 0.025 cm, 1.5 % of them changed. Its 1.36 MB per weight set
+19.8 % of their added MPJPE instead of 18.6 % (time_warp -0.1 -> +5.8, frozen 58.9 -> 63.5, reversed
+0.0 -> +0.7, foot_sliding 37.8 -> 36.0); on the benchmark subjects 11-12 21.6 % instead of 20.2 %
+(time_warp -0.4 -> +5.9, frozen 53.4 -> 64.5, but jitter 23.1 -> 21.0, reversed -0.0 -> -2.1,
+foot_sliding 53.8 -> 51.1), clean clips 0.024 cm, 1.5 % of them changed. Its 1.36 MB per weight set
 would take the two HumanAct12 sets past their 20 MB (and all weights past 30 MB); the 0.36 MB
 variant (``hidden=64``) fits but re-times noise (see ``hidden``).
 """
@@ -36,6 +36,7 @@ from refiner.core.skeletons import get_skeleton
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.training import TrainSchedule, fit_network, resolve_device, seeded
+from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 from refiner.refinement.training_flaws import GROUPS, synthesize
 
 __all__ = ["TimingEstimator", "TimingNet", "timing_features", "random_retiming", "retime_by_offsets", "OTHER_KINDS"]
@@ -109,10 +110,14 @@ def retime_by_offsets(x: np.ndarray, offsets: np.ndarray, threshold: float, *, w
     [(start, stop), ...])`` with every frame outside the runs exactly as given."""
     d = np.asarray(offsets, np.float64)
     out = np.array(x, copy=True)
+    if d.shape != (len(out),):
+        raise ValueError(f"`offsets` must have one value per frame ({len(out)}); got shape {d.shape}.")
+    if widen < 0:
+        raise ValueError(f"`widen` must be >= 0; got {widen}.")
     big = np.abs(d) >= threshold
     if not big.any():
         return out, []
-    grown = np.convolve(big.astype(float), np.ones(2 * widen + 1), mode="same") > 0
+    grown = np.convolve(big.astype(float), np.ones(2 * widen + 1))[widen : widen + len(d)] > 0  # any clip length
     edges = np.flatnonzero(np.diff(np.r_[False, grown, False].astype(int)))
     runs = []
     for a, b in zip(edges[::2], np.minimum(edges[1::2], len(d) - 1)):
@@ -122,7 +127,9 @@ def retime_by_offsets(x: np.ndarray, offsets: np.ndarray, threshold: float, *, w
         s = np.clip(frames + d[a : b + 1], a, b)
         s[0], s[-1] = a, b  # the run's ends stay where they are
         s = np.maximum.accumulate(s) + np.arange(len(s)) * 1e-6  # strictly increasing to invert
-        out[a : b + 1] = resample(np.asarray(x, np.float64)[a : b + 1], np.interp(frames, s, frames) - a).astype(out.dtype)
+        t = np.interp(frames, s, frames)
+        t[0], t[-1] = a, b  # source times tied with an end (clipped there) must not move the end itself
+        out[a : b + 1] = resample(np.asarray(x, np.float64)[a : b + 1], t - a).astype(out.dtype)
         runs.append((int(a), int(b) + 1))
     return out, runs
 
@@ -256,6 +263,9 @@ class TimingEstimator(NetworkComponent):
     def calibrate(self, clips, *, clip_rate: float = 0.05) -> float:
         """Set ``threshold_`` (frames) so that at most ``clip_rate`` of these clean clips (held-out subjects)
         have an estimated offset that large anywhere; returns it."""
+        if len(clips) == 0 or not 0.0 <= clip_rate <= 1.0:
+            raise ValueError(f"calibrate needs clean clips and 0 <= clip_rate <= 1; got {len(clips)} clips, "
+                             f"clip_rate {clip_rate}.")
         peaks = [float(np.abs(self.offsets(np.asarray(c, np.float32)[None])[0]).max()) for c in clips]
         self.threshold_ = float(np.quantile(peaks, 1 - clip_rate))
         return self.threshold_
@@ -271,6 +281,11 @@ def estimated_retiming(refiner, clips: np.ndarray, reports: list, mode: str) -> 
     out = clips.copy()
     for b, report in enumerate(reports):
         out[b], runs = retime_by_offsets(clips[b], offsets[b], estimator.threshold_, widen=estimator.widen)
+        changed = np.zeros(len(out[b]), bool)
+        for lo, hi in runs:
+            changed[lo:hi] = True
+        if runs:  # re-sampled frames have shortened bones: back on the clip's own lengths
+            out[b] = project_bone_lengths(out[b], reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
         for lo, hi in runs:
             moved = 100 * float(np.linalg.norm(out[b][lo:hi] - clips[b][lo:hi], axis=-1).mean())
             report.changes.append({"start": lo, "stop": hi, "step": "transition", "repair": "estimated_retime",
