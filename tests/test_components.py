@@ -217,6 +217,8 @@ def test_lower_triangles_pack_and_unpack(rng):
     np.testing.assert_array_equal(unpack_lower(pack_lower(cov), symmetric=True), cov)
     with pytest.raises(ValueError, match="not the lower triangle"):
         unpack_lower(np.zeros(7))
+    with pytest.raises(ValueError, match="square"):
+        pack_lower(np.zeros((5, 3)))
 
 
 @pytest.mark.real_data

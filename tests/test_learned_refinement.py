@@ -185,6 +185,10 @@ def test_robust_bone_lengths_trust_noise_and_doubt_drift(rng):
     exact[::3] *= 0.9
     np.testing.assert_allclose(robust_bone_lengths(exact[None], prop)[0], true * 1.1)
     assert prop.select(np.array([True, False, True])).mean.sum() == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="has 3 bones; the lengths have 2"):
+        robust_bone_lengths(np.stack([noisy[:, :2]]), prop)
+    with pytest.raises(ValueError, match="B, T, n_bones"):
+        robust_bone_lengths(noisy, prop)
 
 
 @pytest.mark.real_data

@@ -356,3 +356,5 @@ def test_lie_vae_guidance_extrapolates_the_action_code():
 def test_shipped_generators_sample_with_their_kinds_guidance():
     for kind in ("a2m-large", "actor-large"):
         assert load_reference_generator(kind).guidance == KIND_PARAMETERS[kind]["guidance"]
+    with pytest.raises(ValueError, match="`guidance` must be a finite number"):
+        load_reference_generator("a2m-large").set_params(guidance=float("nan")).sample(0, 1)

@@ -68,6 +68,8 @@ def test_unfitted_estimator_says_so():
         TimingEstimator().offsets(np.zeros((1, 20, 24, 3), np.float32))
     with pytest.raises(ValueError, match="at least 8 frames"):
         TimingEstimator().fit([np.zeros((5, 24, 3))])
+    with pytest.raises(ValueError, match="needs clean clips"):
+        TimingEstimator().calibrate([])
 
 
 def test_run_ends_stay_and_short_clips_find_their_runs():
