@@ -43,6 +43,8 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert again.flaw_denoiser is not None and again.flaw_denoiser.skeleton_ == "humanact12"
     assert again.motion_infiller is not None and again.motion_infiller.n_joints_ == 24
     assert again.timing_estimator is not None and again.retiming == "estimated"
+    assert again.noise_filter is not None and again.denoising == "filter" and again.noise_filter.half_width == 1
+    assert again.manifest["learned"]["noise_threshold_m"] == pytest.approx(again.noise_filter.threshold_)
     assert np.isfinite(again.timing_estimator.threshold_)
     assert again.manifest["learned"]["timing_threshold_frames"] == pytest.approx(again.timing_estimator.threshold_)
     flagged = Refiner.load(out, retiming="flagged")
@@ -66,8 +68,8 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
                                refiner.flaw_recognizer.predict(x[None])["flaw"], atol=1e-3)  # float16 weights
     before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
     parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
-    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "flaw_denoiser", "motion_infiller",
-                          "timing_estimator"}
+    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "flaw_denoiser",
+                          "motion_infiller", "timing_estimator"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
 
 
@@ -392,6 +394,7 @@ def test_typed_motion_infill_repair_and_its_stand_in(tiny_learned, humanact12, m
     if not with_infiller:
         forced.motion_infiller = None  # weights without it: the repair network's in-fill stands in
     forced.flaw_classifier.threshold_ = 1e-6  # flag every frame
+    forced.denoising = "flagged"  # the typed repairs alone (not the last step for clips noisy throughout)
     for group in learned_pipeline.TYPED_REPAIRS:
         monkeypatch.setitem(learned_pipeline.TYPED_REPAIRS, group, ("motion_infill", 0))
     monkeypatch.setattr(learned_pipeline, "VERIFY_TYPED", ())

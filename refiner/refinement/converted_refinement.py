@@ -21,7 +21,7 @@ from refiner.core.skeletons import BoneProportions, get_skeleton, rigid_skeleton
 from refiner.core.validation import check_joints
 from refiner.refinement.inputs import MIN_FRAMES, check_metres_each, thread_limits
 
-__all__ = ["ConvertedRefiner", "FLEXIBLE_BONES"]
+__all__ = ["ConvertedRefiner", "FLEXIBLE_BONES", "converts_with_humanact12"]
 
 #: "Bones" of a layout that span a bending chain, so real motion changes their length: left out of
 #: the rigid-skeleton step. Measured on HumanAct12 subjects 1-10 (every 10th clip) converted to each
@@ -149,3 +149,12 @@ class ConvertedRefiner:
         if return_report:
             return result, (reports if batched else reports[0])
         return result
+
+
+def converts_with_humanact12(skeleton: str) -> bool:
+    """Whether :func:`refiner.core.skeletons.convert` connects ``skeleton`` with HumanAct12 both ways."""
+    try:
+        estimated_joints(skeleton, "humanact12"), estimated_joints("humanact12", skeleton)
+    except ValueError:
+        return False
+    return get_skeleton(skeleton).name != "humanact12"

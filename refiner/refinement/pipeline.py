@@ -20,7 +20,6 @@ from refiner.concepts.transitions import TransitionGenerator
 from refiner.core.manifest import file_sha256, read_refiner_manifest, write_manifest
 from refiner.core.motion import Motion
 from refiner.core.output_kind import like_input
-from refiner.core.skeleton_conversion import estimated_joints
 from refiner.core.skeletons import BoneProportions, get_skeleton
 from refiner.core.validation import check_joints
 from refiner.nn.training import resolve_device
@@ -28,12 +27,13 @@ from refiner.refinement import concepts_pipeline, learned_pipeline
 from refiner.refinement.anchor_quality import AnchorQuality
 from refiner.refinement.anchor_recognition import AnchorRecognizer
 from refiner.refinement.anchor_refinement import AnchorRefiner
-from refiner.refinement.converted_refinement import ConvertedRefiner
+from refiner.refinement.converted_refinement import ConvertedRefiner, converts_with_humanact12
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.inputs import MODES, auto_threads, check_choice, check_metres, check_metres_each, check_threads, thread_limits
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
+from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.report import RefinementReport
 from refiner.refinement.splicing import project_bone_lengths, splice
 from refiner.refinement.transition_refinement import TransitionRefiner
@@ -55,6 +55,7 @@ _PARTS = {
     "flaw_denoiser": FlawDenoiser,
     "motion_infiller": MotionInfiller,
     "timing_estimator": TimingEstimator,
+    "noise_filter": NoiseFilter,
 }
 _NO_DEVICE = ("anchor_concepts", "anchor_quality")
 #: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
@@ -64,6 +65,8 @@ RIGID_LENGTHS = ("proportions", "median")
 #: Timing flaws: the timing estimator's runs re-timed first, then flagged stalls (``"estimated"``), or only
 #: the stalls in runs the flaw detector flags as timing (``"flagged"``, the release before the estimator).
 RETIMING = ("estimated", "flagged")
+#: Noise: flagged runs, then clips noisy throughout (``"filter"``), or flagged runs only (``"flagged"``).
+DENOISING = ("filter", "flagged")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 #: Thresholds a manifest's ``calibration`` entry may hold; they belong to the steps, which save them.
 _CALIBRATED = ("anchor_threshold", "transition_threshold", "transition_thresholds")
@@ -82,8 +85,7 @@ class Refiner:
         Needed for ``quality="pose"`` and ``anchor_method="posterior"``.
     flaw_recognizer, flaw_repairer, flaw_classifier, flaw_denoiser, motion_infiller : optional
         The learned steps (:class:`FlawRecognizer`, :class:`FlawRepairer`, :class:`FlawClassifier`,
-        :class:`FlawDenoiser`, :class:`MotionInfiller`; without the denoiser, noise is smoothed instead;
-        without the in-filler, the repair network's in-fill stands in).
+        :class:`FlawDenoiser`, :class:`MotionInfiller`; without the in-filler, the network's in-fill stands in).
     skeleton : str, default="humanact12"
     action_names : sequence of str
     mode : {"full", "anchor", "transition"}, default="full"
@@ -96,11 +98,15 @@ class Refiner:
         by ``margin=2``, extended while the score stays above ``hysteresis=0.5`` of it; ``change_penalty=0.01``
         is the flaw probability a ``"select"`` candidate must gain per centimetre; a clip whose bone lengths
         vary more than ``rigid_tolerance=0.005`` (std / mean; mocap: under 0.001 %) is put back on rigid bones.
-    timing_estimator : TimingEstimator, optional
-        The learned re-timing step (:mod:`refiner.refinement.timing_estimation`).
+    timing_estimator, noise_filter : optional
+        The learned re-timing step (:mod:`refiner.refinement.timing_estimation`) and noise filter
+        (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead).
     retiming : {"estimated", "flagged"}, optional
         ``"estimated"`` (default when there is a ``timing_estimator``): the runs it finds are re-timed before
         detection; ``"flagged"``: only stalls in runs the flaw detector flags as timing.
+    denoising : {"filter", "flagged"}, optional
+        ``"filter"`` (default when there is a ``noise_filter``): clips noisy throughout are denoised last;
+        ``"flagged"``: only flagged noise runs are.
     rigid_lengths : {"proportions", "median"}, optional
         The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions
         the weights learned (``manifest["learned"]["bone_proportions"]``; a drifting bone's median is as
@@ -113,10 +119,9 @@ class Refiner:
         Frames over which a change is tapered in at each kept side.
     threads : int, "auto" or None, default="auto"
         torch intra-op (and BLAS) threads while refining, restored afterwards. The networks are
-        small: on a 2-core CPU one thread refined a 60-frame clip in 12 ms, torch's default two in
-        113 ms; but a batch of 256 clips went at 515 clips/s on one thread and 742 on two.
-        ``"auto"``: one thread for batches under :data:`~refiner.refinement.inputs.AUTO_THREADS_BATCH`
-        clips, else the available cores up to 4. None leaves torch's setting alone.
+        small: on a 2-core CPU one thread refined a 60-frame clip in 12 ms, torch's default two in 113 ms;
+        a batch of 256 went at 515 clips/s on one thread and 742 on two. ``"auto"``: one thread under
+        :data:`~refiner.refinement.inputs.AUTO_THREADS_BATCH` clips, else the cores up to 4; None: torch's setting.
     manifest : dict, optional
         Provenance of the weights (dataset, split, licence, hashes) and ``calibration``, the record of
         :meth:`calibrate`. Thresholds found there (``anchor_threshold``; ``transition_thresholds`` or
@@ -131,10 +136,11 @@ class Refiner:
 
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
                  anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None,
-                 flaw_denoiser=None, motion_infiller=None, timing_estimator=None, *,
+                 flaw_denoiser=None, motion_infiller=None, timing_estimator=None, noise_filter=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, retiming: str | None = None,
+                 denoising: str | None = None,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | str | None = "auto", manifest: dict | None = None):
@@ -142,6 +148,7 @@ class Refiner:
         self.transition_generator, self.transition_refiner = transition_generator, transition_refiner
         self.flaw_recognizer, self.flaw_repairer, self.flaw_classifier = flaw_recognizer, flaw_repairer, flaw_classifier
         self.flaw_denoiser, self.motion_infiller, self.timing_estimator = flaw_denoiser, motion_infiller, timing_estimator
+        self.noise_filter = noise_filter
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
         if self.method == "learned" and not learned:
@@ -187,8 +194,11 @@ class Refiner:
             "median" if self.bone_proportions is None else "proportions"), RIGID_LENGTHS)
         self.retiming = check_choice("retiming", retiming or ("flagged" if timing_estimator is None else "estimated"),
                                      RETIMING)
-        if self.retiming == "estimated" and timing_estimator is None:
-            raise ValueError("retiming='estimated' needs a `timing_estimator`, which these weights lack; use 'flagged'.")
+        self.denoising = check_choice("denoising", denoising or ("flagged" if noise_filter is None else "filter"), DENOISING)
+        for option, value, part, name in (("retiming", self.retiming, timing_estimator, "timing_estimator"),
+                                          ("denoising", self.denoising, noise_filter, "noise_filter")):
+            if value != "flagged" and part is None:
+                raise ValueError(f"{option}={value!r} needs a `{name}`, which these weights lack; use 'flagged'.")
         if self.rigid_lengths == "proportions" and self.bone_proportions is None:
             raise ValueError("rigid_lengths='proportions' needs the bone proportions of the weights' manifest "
                              "(`learned.bone_proportions`), which these weights lack; use 'median'.")
@@ -329,11 +339,10 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
     The same kind as ``seq`` (Motion, numpy array or torch tensor), refined; frames that were not
     flagged are returned exactly as given. The input is never modified.
 
-    dtypes and tensors: refinement runs in float32; a floating input (float64, float16, torch
-    bfloat16) comes back in its own dtype with its unchanged frames bit-identical, other inputs as
-    float32. A tensor comes back on its own device; one that requires grad comes back detached with a
-    ``UserWarning`` (refinement is not differentiable). Sparse tensors and tensors on the ``meta``
-    device raise ``ValueError``, as does a refiner loaded for an unavailable ``device``.
+    dtypes and tensors: refinement runs in float32; a floating input (float64, float16, bfloat16) comes
+    back in its own dtype, unchanged frames bit-identical, others as float32. A tensor comes back on its
+    device; one that requires grad comes back detached with a ``UserWarning`` (not differentiable).
+    Sparse and ``meta`` tensors raise ``ValueError``, as does a refiner loaded for an unavailable device.
 
     Examples
     --------
@@ -353,7 +362,7 @@ def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict
     folder = _WEIGHTS / name
     if not (folder / "manifest.json").is_file() and split == "all" and (_WEIGHTS / f"{name}-train" / "manifest.json").is_file():
         return _shared_pretrained(cls, skeleton, "train", device, kwargs)  # a skeleton that ships train-split weights only
-    if not (folder / "manifest.json").is_file() and _converts(skeleton):
+    if not (folder / "manifest.json").is_file() and converts_with_humanact12(skeleton):
         kwargs = dict(kwargs)
         tolerance = kwargs.pop("rigid_tolerance", 0.005)  # on the clip's own bones, not the estimated ones
         base = _shared_pretrained(cls, "humanact12", split, device, {**kwargs, "rigid_tolerance": float("inf")})
@@ -384,11 +393,3 @@ def shipped_weights() -> list[dict]:
                     "parts": sorted(manifest.get("files", {}))})
     return out
 
-
-def _converts(skeleton: str) -> bool:
-    """Whether :func:`refiner.core.skeletons.convert` connects ``skeleton`` with HumanAct12 both ways."""
-    try:
-        estimated_joints(skeleton, "humanact12"), estimated_joints("humanact12", skeleton)
-    except ValueError:
-        return False
-    return get_skeleton(skeleton).name != "humanact12"

@@ -21,6 +21,7 @@ from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
+from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
 from refiner.refinement.timing_estimation import TimingEstimator
 
@@ -52,7 +53,9 @@ CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
 #: one CPU core) and the motion in-filler (about 40), and their tiny test version.
 CORRECTION_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
-LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer")
+LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter")
+#: The noise filter's settings (fitted in closed form: about a minute on one CPU core) and its tiny test version.
+NOISE_FILTER_CONFIGS = {"default": {}, "tiny": dict(half_width=1, copies=1)}
 #: Parts trained only when asked (``only=``): the denoiser and the motion in-filler serve options of the
 #: refiner (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
 #: they are calibrated and installed with the others.
@@ -61,7 +64,8 @@ OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller", "timing_estimator")
 TIMING_CONFIGS = {"default": dict(schedule=dict()),
                   "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
-            "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator}
+            "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator,
+            "noise_filter": NoiseFilter}
 _CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": CORRECTION_CONFIGS, "motion_infiller": CORRECTION_CONFIGS,
             "timing_estimator": TIMING_CONFIGS}
 
@@ -114,6 +118,14 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
             continue
         t0 = time.perf_counter()
         cls = _CLASSES[name]
+        if name == "noise_filter":  # closed form: no schedule, no checkpoint
+            cfg = NOISE_FILTER_CONFIGS["tiny" if config == "tiny" else "default"]
+            est = cls(**cfg, random_state=random_state).fit(pick(fit_idx)[0], skeleton=skeleton)
+            est.save(parts_dir / f"{name}.safetensors")
+            (parts_dir / f"{name}.json").write_text(json.dumps({"seconds": round(time.perf_counter() - t0, 1), "split": split,
+                                                                "fit_clips": int(len(fit_idx))}, indent=1))
+            done[name] = est
+            continue
         cfg = dict(_CONFIGS.get(name, LEARNED_CONFIGS)[config])
         schedule = replace(cls().schedule, **cfg.pop("schedule"), **run)
         est = cls(**cfg, schedule=schedule, random_state=random_state)
@@ -152,6 +164,8 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.flaw_denoiser = parts.get("flaw_denoiser")
     refiner.motion_infiller = parts.get("motion_infiller")
     refiner.timing_estimator = parts.get("timing_estimator")
+    refiner.noise_filter = parts.get("noise_filter")
+    refiner.denoising = "filter" if refiner.noise_filter is not None else "flagged"
     refiner.retiming = "estimated" if refiner.timing_estimator is not None else "flagged"
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
                                    "classifier_threshold": float(parts["flaw_classifier"].threshold_),
@@ -159,7 +173,9 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
                                    **({"denoiser_threshold_m": float(parts["flaw_denoiser"].threshold_)}
                                       if parts.get("flaw_denoiser") is not None else {}),
                                    **({"timing_threshold_frames": float(parts["timing_estimator"].threshold_)}
-                                      if parts.get("timing_estimator") is not None else {})}
+                                      if parts.get("timing_estimator") is not None else {}),
+                                   **({"noise_threshold_m": float(parts["noise_filter"].threshold_)}
+                                      if parts.get("noise_filter") is not None else {})}
     refiner.save(out or folder, half=True)
     return Refiner.load(out or folder)
 
@@ -209,4 +225,6 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
                if "flaw_denoiser" in parts else {}),
             **({"timing_threshold_frames": parts["timing_estimator"].calibrate(clips, clip_rate=TIMING_CLIP_RATE)}
                if "timing_estimator" in parts else {}),
+            **({"noise_threshold_m": parts["noise_filter"].calibrate(clips, clip_rate=clip_rate)}
+               if "noise_filter" in parts else {}),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}

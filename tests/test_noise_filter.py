@@ -1,0 +1,105 @@
+"""The learned noise filter: fitted on real clips, it removes white noise better than smoothing, leaves clean
+clips alone, survives float16 storage, refuses bad input, and runs as the refiner's noise steps."""
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter1d
+
+from refiner.core.validation import NotFittedError
+from refiner.refinement.noise_filter import NoiseFilter, window_features
+from refiner.refinement.pipeline import Refiner
+
+
+def _error(y, x):
+    return float(np.linalg.norm(np.asarray(y, np.float64) - x, axis=-1).mean())
+
+
+@pytest.fixture(scope="module")
+def fitted(humanact12):
+    train = [m.joints for m in humanact12.motions[:900:6]]
+    held = [m.joints for m in humanact12.motions[900:1190:5]]
+    return NoiseFilter(copies=1).fit(train), held
+
+
+def test_window_features_are_displacements_and_pose():
+    import torch
+
+    x = torch.arange(2 * 5 * 2 * 3, dtype=torch.float32).reshape(2, 5, 2, 3)
+    f = window_features(x, 1)
+    assert f.shape == (2, 5, 3 * 6)
+    np.testing.assert_allclose(f[0, 2, :6].numpy(), (x[0, 1] - x[0, 2]).reshape(-1).numpy())  # frame before
+    np.testing.assert_allclose(f[0, 0, :6].numpy(), 0.0)  # the first frame's "before" repeats it
+    np.testing.assert_allclose(f[0, 2, 12:].numpy(), (x[0, 2] - x[0, 2, :1]).reshape(-1).numpy())  # pose from the root
+
+
+@pytest.mark.real_data
+def test_filter_removes_white_noise_better_than_smoothing(fitted, rng):
+    nf, held = fitted
+    assert np.all(np.diff(nf.level_rms_) >= 0) and nf.level_rms_[-1] > 3 * nf.level_rms_[0]
+    before, after, smooth, levels, clean_levels = [], [], [], [], []
+    for x in held[:30]:
+        x = x.astype(np.float64)
+        y = (x + 0.01 * rng.normal(size=x.shape)).astype(np.float32)
+        out = nf.denoise(y[None])[0]
+        before.append(_error(y, x)), after.append(_error(out, x))
+        smooth.append(_error(gaussian_filter1d(y, 1.0, axis=0, mode="nearest"), x))
+        levels.append(np.median(nf.noise_level(y[None])))
+        clean_levels.append(np.median(nf.noise_level(x[None])))
+    assert np.mean(after) < 0.75 * np.mean(before), (np.mean(before), np.mean(after))
+    assert np.mean(after) < np.mean(smooth), (np.mean(smooth), np.mean(after))
+    assert 0.006 < np.median(levels) < 0.015 and np.median(clean_levels) < 0.004
+    still = np.repeat(held[0][:1], 30, axis=0)[None] + np.float32(1e-3)  # running sums of zeros: no NaN
+    assert np.isfinite(nf.noise_level(still)).all() and np.array_equal(nf.denoise_clips(still)[0], still)
+
+
+@pytest.mark.real_data
+def test_only_clips_noisy_throughout_change(fitted, rng, tmp_path):
+    nf, held = fitted
+    threshold = nf.calibrate(held[30:], clip_rate=0.1)
+    assert 0 < threshold < 0.01
+    clean = np.stack([c[:40] for c in held[:20] if len(c) >= 40])
+    quiet = nf.clip_noise_level(clean) <= threshold
+    out, levels = nf.denoise_clips(clean)
+    np.testing.assert_array_equal(out[quiet], clean[quiet])  # exactly as given
+    assert quiet.mean() >= 0.7
+    noisy = (clean + 0.02 * rng.normal(size=clean.shape)).astype(np.float32)
+    given = noisy.copy()
+    out, levels = nf.denoise_clips(noisy)
+    np.testing.assert_array_equal(noisy, given)  # the input is not modified
+    assert (levels > threshold).all() and _error(out, clean) < 0.7 * _error(noisy, clean)
+    path = tmp_path / "noise_filter.safetensors"
+    nf.save(path, half=True)
+    again = NoiseFilter.load(path)
+    assert again.threshold_ == threshold and again.level_rms_ == nf.level_rms_
+    np.testing.assert_allclose(again.denoise(noisy[:3]), nf.denoise(noisy[:3]), atol=5e-4)  # float16 weights
+
+
+def test_unfitted_and_bad_input_are_refused(fitted):
+    with pytest.raises(NotFittedError):
+        NoiseFilter().denoise(np.zeros((1, 10, 24, 3), np.float32))
+    with pytest.raises(ValueError, match="including 0.01"):
+        NoiseFilter(levels=(0.02, 0.04)).fit([np.zeros((10, 24, 3))])
+    with pytest.raises(ValueError, match="non-empty list"):
+        NoiseFilter().fit([np.zeros((1, 24, 3))])
+    nf, held = fitted
+    for bad, match in ((np.zeros((10, 24, 3)), "B, T, 24, 3"), (np.full((1, 10, 24, 3), np.nan), "finite")):
+        with pytest.raises(ValueError, match=match):
+            nf.denoise(bad)
+    with pytest.raises(ValueError, match="clip_rate"):
+        nf.calibrate(held[:3], clip_rate=1.5)
+
+
+@pytest.mark.real_data
+def test_shipped_refiner_denoises_clips_noisy_throughout(humanact12, rng, one_torch_thread):
+    model = Refiner.pretrained("humanact12", split="train")
+    assert model.noise_filter is not None and model.denoising == "filter"
+    assert model.manifest["learned"]["noise_threshold_m"] == pytest.approx(model.noise_filter.threshold_)
+    x = humanact12[700].joints[:60].astype(np.float64)
+    noisy = (x + 0.015 * rng.normal(size=x.shape)).astype(np.float32)
+    out, report = model.refine(noisy, return_report=True)
+    assert any(c["step"] == "noise" and c["repair"] == "noise_filter" for c in report.changes)
+    assert _error(out, x) < 0.75 * _error(noisy, x)
+    flagged = Refiner.pretrained("humanact12", split="train", denoising="flagged")
+    _, report = flagged.refine(noisy, return_report=True)
+    assert not any(c["step"] == "noise" for c in report.changes)
+    with pytest.raises(ValueError, match="denoising='filter' needs a `noise_filter`"):
+        Refiner(*(None,) * 6, model.flaw_recognizer, model.flaw_repairer, model.flaw_classifier, denoising="filter")
