@@ -7,6 +7,7 @@ parallel processes, then ``assemble``)::
     python examples/train_cmu_weights.py OUT flaw_recognizer
     python examples/train_cmu_weights.py OUT flaw_repairer
     python examples/train_cmu_weights.py OUT noise_filter                  # closed form, about a minute
+    python examples/train_cmu_weights.py OUT amplitude_restorer            # medians, seconds
     python examples/train_cmu_weights.py OUT assemble [FOLDER]     # default FOLDER: OUT/refiner
 
 Training clips: the CMU subset's training subjects (every subject but
@@ -48,13 +49,14 @@ elif stage == "assemble":
                    if k != "history"} for name in tl.LEARNED_PARTS}
     manifest = {"dataset": "cmu_mocap", "split": "train", "config": "default (flaw recogniser: 10 epochs)",
                 "clips": len(train), "subjects": sorted(set(int(s) for s in train.subjects)), "licence": CMU_LICENCE,
-                "command": "python examples/train_cmu_weights.py OUT {flaw_classifier,flaw_recognizer,flaw_repairer,noise_filter,assemble}",
+                "command": "python examples/train_cmu_weights.py OUT {flaw_classifier,flaw_recognizer,flaw_repairer,noise_filter,amplitude_restorer,assemble}",
                 "notes": ["learned steps only: method='concepts' (the paper's parts) is not available for these weights",
                           f"training clips of at least {MIN_FRAMES} frames", "held-out subjects: "
                           "refiner.io.datasets.CMU_TEST_SUBJECTS"],
                 "learned": {**info, **thresholds}}
     model = Refiner(None, None, None, None, None, None, parts["flaw_recognizer"], parts["flaw_repairer"],
-                    parts["flaw_classifier"], noise_filter=parts["noise_filter"], skeleton="cmu_mocap",
+                    parts["flaw_classifier"], noise_filter=parts["noise_filter"],
+                    amplitude_restorer=parts["amplitude_restorer"], skeleton="cmu_mocap",
                     action_names=CMU_ACTIONS, manifest=manifest)
     folder = Path(sys.argv[3]) if len(sys.argv) > 3 else out / "refiner"
     model.save(folder, half=True)

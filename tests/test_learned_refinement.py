@@ -45,6 +45,8 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert again.timing_estimator is not None and again.retiming == "estimated"
     assert again.noise_filter is not None and again.denoising == "filter" and again.noise_filter.half_width == 1
     assert again.manifest["learned"]["noise_threshold_m"] == pytest.approx(again.noise_filter.threshold_)
+    assert again.amplitude_restorer is not None and 0 < again.amplitude_restorer.gate_ < 1
+    assert again.manifest["learned"]["amplitude_gate"] == pytest.approx(again.amplitude_restorer.gate_)
     assert np.isfinite(again.timing_estimator.threshold_)
     assert again.manifest["learned"]["timing_threshold_frames"] == pytest.approx(again.timing_estimator.threshold_)
     flagged = Refiner.load(out, retiming="flagged")
@@ -68,8 +70,8 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
                                refiner.flaw_recognizer.predict(x[None])["flaw"], atol=1e-3)  # float16 weights
     before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
     parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
-    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "flaw_denoiser",
-                          "motion_infiller", "timing_estimator"}
+    assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer",
+                          "flaw_denoiser", "motion_infiller", "timing_estimator"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
 
 

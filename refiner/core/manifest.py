@@ -23,6 +23,7 @@ __all__ = [
     "read_evaluator_manifest",
     "read_generator_manifest",
     "read_refiner_manifest",
+    "refiner_weight_sets",
     "write_manifest",
 ]
 
@@ -171,3 +172,18 @@ def _check_type(manifest: dict, key: str, kind: type, where: str):
 def _is_number(x) -> bool:
     """A JSON number that is not NaN (infinity allowed: an open upper bin)."""
     return isinstance(x, (int, float)) and not isinstance(x, bool) and not math.isnan(x)
+
+
+def refiner_weight_sets(weights: str | os.PathLike) -> list[dict]:
+    """The refiner weight sets in the folder ``weights``: ``folder``, ``skeleton``, ``split``, ``dataset``,
+    ``licence`` and ``parts`` of each, from its manifest (``Refiner.shipped()`` lists the package's)."""
+    out = []
+    root = Path(weights)
+    for folder in sorted(p for p in root.iterdir() if (p / "manifest.json").is_file()) if root.is_dir() else []:
+        manifest = json.loads((folder / "manifest.json").read_text())
+        if "action_names" not in manifest:  # evaluator and generator weights have manifests of another kind
+            continue
+        out.append({"folder": folder.name, "skeleton": manifest["skeleton"], "split": manifest.get("split", "all"),
+                    "dataset": manifest.get("dataset"), "licence": manifest.get("licence"),
+                    "parts": sorted(manifest.get("files", {}))})
+    return out

@@ -90,9 +90,9 @@ def native_records(data: Path | None, *, families=None, stride: int = 1, split: 
     ``refined`` clips (flawed / refined: mean over families) and the weights' ``licence``."""
     from refiner.evaluation.evaluators import load_recognizer  # imports torch: see skeleton_records
     from refiner.io.datasets import load_cmu_mocap
-    from refiner.refinement.pipeline import Refiner, shipped_weights
+    from refiner.refinement.pipeline import Refiner
 
-    shipped = {(w["skeleton"], w["split"]) for w in shipped_weights()}
+    shipped = {(w["skeleton"], w["split"]) for w in Refiner.shipped()}
     rec = {}
     for name, dataset in NATIVE.items():
         if (name, split) not in shipped:

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from refiner.core.skeletons import get_skeleton, rigid_skeleton
+from refiner.refinement.amplitude import restored_amplitude
 from refiner.refinement.anchor_recognition import anchor_peaks
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
@@ -295,6 +296,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
             report.changes.append({"start": 0, "stop": clips.shape[1], "step": "skeleton", "reason":
                                    f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
                                    f"0 %); every frame put back on {lengths}"})
+    clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it
     clips = estimated_retiming(refiner, clips, reports, mode)  # timing first: detection then sees it fixed
     rec = refiner.flaw_recognizer.predict(clips, actions)
     threshold = float(refiner.flaw_recognizer.threshold_)

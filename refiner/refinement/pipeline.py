@@ -17,13 +17,14 @@ import numpy as np
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.transitions import TransitionGenerator
-from refiner.core.manifest import file_sha256, read_refiner_manifest, write_manifest
+from refiner.core.manifest import file_sha256, read_refiner_manifest, refiner_weight_sets, write_manifest
 from refiner.core.motion import Motion
 from refiner.core.output_kind import like_input
 from refiner.core.skeletons import BoneProportions, get_skeleton
 from refiner.core.validation import check_joints
 from refiner.nn.training import resolve_device
 from refiner.refinement import concepts_pipeline, learned_pipeline
+from refiner.refinement.amplitude import AmplitudeRestorer
 from refiner.refinement.anchor_quality import AnchorQuality
 from refiner.refinement.anchor_recognition import AnchorRecognizer
 from refiner.refinement.anchor_refinement import AnchorRefiner
@@ -56,8 +57,9 @@ _PARTS = {
     "motion_infiller": MotionInfiller,
     "timing_estimator": TimingEstimator,
     "noise_filter": NoiseFilter,
+    "amplitude_restorer": AmplitudeRestorer,
 }
-_NO_DEVICE = ("anchor_concepts", "anchor_quality")
+_NO_DEVICE = ("anchor_concepts", "anchor_quality", "amplitude_restorer")
 #: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
 METHODS = ("learned", "concepts")
 #: Lengths of the rigid skeleton: the clip's medians drawn toward learned proportions, or the medians.
@@ -67,6 +69,8 @@ RIGID_LENGTHS = ("proportions", "median")
 RETIMING = ("estimated", "flagged")
 #: Noise: flagged runs, then clips noisy throughout (``"filter"``), or flagged runs only (``"flagged"``).
 DENOISING = ("filter", "flagged")
+#: Clips that move too little for their action: scaled back (``"restore"``) or kept (``"keep"``).
+AMPLITUDE = ("restore", "keep")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 #: Thresholds a manifest's ``calibration`` entry may hold; they belong to the steps, which save them.
 _CALIBRATED = ("anchor_threshold", "transition_threshold", "transition_thresholds")
@@ -98,9 +102,10 @@ class Refiner:
         by ``margin=2``, extended while the score stays above ``hysteresis=0.5`` of it; ``change_penalty=0.01``
         is the flaw probability a ``"select"`` candidate must gain per centimetre; a clip whose bone lengths
         vary more than ``rigid_tolerance=0.005`` (std / mean; mocap: under 0.001 %) is put back on rigid bones.
-    timing_estimator, noise_filter : optional
-        The learned re-timing step (:mod:`refiner.refinement.timing_estimation`) and noise filter
-        (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead).
+    timing_estimator, noise_filter, amplitude_restorer : optional
+        The learned re-timing step (:mod:`refiner.refinement.timing_estimation`), noise filter
+        (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead) and
+        amplitude step (:mod:`refiner.refinement.amplitude`; ``amplitude="keep"`` skips it).
     retiming : {"estimated", "flagged"}, optional
         ``"estimated"`` (default when there is a ``timing_estimator``): the runs it finds are re-timed before
         detection; ``"flagged"``: only stalls in runs the flaw detector flags as timing.
@@ -136,11 +141,12 @@ class Refiner:
 
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
                  anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None,
-                 flaw_denoiser=None, motion_infiller=None, timing_estimator=None, noise_filter=None, *,
+                 flaw_denoiser=None, motion_infiller=None, timing_estimator=None, noise_filter=None,
+                 amplitude_restorer=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, retiming: str | None = None,
-                 denoising: str | None = None,
+                 denoising: str | None = None, amplitude: str = "restore",
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | str | None = "auto", manifest: dict | None = None):
@@ -148,7 +154,8 @@ class Refiner:
         self.transition_generator, self.transition_refiner = transition_generator, transition_refiner
         self.flaw_recognizer, self.flaw_repairer, self.flaw_classifier = flaw_recognizer, flaw_repairer, flaw_classifier
         self.flaw_denoiser, self.motion_infiller, self.timing_estimator = flaw_denoiser, motion_infiller, timing_estimator
-        self.noise_filter = noise_filter
+        self.noise_filter, self.amplitude_restorer = noise_filter, amplitude_restorer
+        self.amplitude = check_choice("amplitude", amplitude, AMPLITUDE)
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
         if self.method == "learned" and not learned:
@@ -260,8 +267,8 @@ class Refiner:
 
     @staticmethod
     def shipped() -> list[dict]:
-        """The shipped weight sets with their skeleton, split, dataset and licence (:func:`shipped_weights`)."""
-        return shipped_weights()
+        """The shipped weight sets with their skeleton, split, dataset, licence and parts."""
+        return refiner_weight_sets(_WEIGHTS)
 
     def n_parameters(self) -> dict:
         """Network parameters per part, and their ``total``."""
@@ -371,25 +378,10 @@ def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict
         return ConvertedRefiner(base, skeleton, rigid_tolerance=tolerance,
                                 proportions=BoneProportions.from_dict(record) if use else None)
     if not (folder / "manifest.json").is_file():
-        known = [f"{w['folder']} ({w['skeleton']}, {w['split']})" for w in shipped_weights()]
+        known = [f"{w['folder']} ({w['skeleton']}, {w['split']})" for w in refiner_weight_sets(_WEIGHTS)]
         raise ValueError(f"no shipped weights for skeleton {skeleton!r}, split {split!r}; shipped: "
-                         f"{', '.join(known) or 'none'} (licences: refiner.refinement.pipeline.shipped_weights()).")
+                         f"{', '.join(known) or 'none'} (licences: Refiner.shipped()).")
     key = (name, device, tuple(sorted(kwargs.items())))
     if key not in _PRETRAINED:
         _PRETRAINED[key] = cls.load(folder, device=device, **kwargs)
     return _PRETRAINED[key]
-
-
-def shipped_weights() -> list[dict]:
-    """The refiner weight sets in the package: ``folder``, ``skeleton``, ``split``, ``dataset``, ``licence``
-    and ``parts`` of each, from its manifest (the same as :meth:`Refiner.shipped`)."""
-    out = []
-    for folder in sorted(p for p in _WEIGHTS.iterdir() if (p / "manifest.json").is_file()) if _WEIGHTS.is_dir() else []:
-        manifest = json.loads((folder / "manifest.json").read_text())
-        if "action_names" not in manifest:  # evaluator and generator weights have manifests of another kind
-            continue
-        out.append({"folder": folder.name, "skeleton": manifest["skeleton"], "split": manifest.get("split", "all"),
-                    "dataset": manifest.get("dataset"), "licence": manifest.get("licence"),
-                    "parts": sorted(manifest.get("files", {}))})
-    return out
-

@@ -20,6 +20,7 @@ from refiner.io.datasets import MotionDataset
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.infilling import MotionInfiller
+from refiner.refinement.amplitude import AmplitudeRestorer
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
@@ -53,7 +54,9 @@ CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
 #: one CPU core) and the motion in-filler (about 40), and their tiny test version.
 CORRECTION_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
-LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter")
+LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer")
+#: Share of held-out clean clips the amplitude step may scale: it changes whole clips.
+AMPLITUDE_CLIP_RATE = 0.01
 #: The noise filter's settings (fitted in closed form: about a minute on one CPU core) and its tiny test version.
 NOISE_FILTER_CONFIGS = {"default": {}, "tiny": dict(half_width=1, copies=1)}
 #: Parts trained only when asked (``only=``): the denoiser and the motion in-filler serve options of the
@@ -65,7 +68,7 @@ TIMING_CONFIGS = {"default": dict(schedule=dict()),
                   "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
             "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator,
-            "noise_filter": NoiseFilter}
+            "noise_filter": NoiseFilter, "amplitude_restorer": AmplitudeRestorer}
 _CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": CORRECTION_CONFIGS, "motion_infiller": CORRECTION_CONFIGS,
             "timing_estimator": TIMING_CONFIGS}
 
@@ -118,9 +121,12 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
             continue
         t0 = time.perf_counter()
         cls = _CLASSES[name]
-        if name == "noise_filter":  # closed form: no schedule, no checkpoint
-            cfg = NOISE_FILTER_CONFIGS["tiny" if config == "tiny" else "default"]
-            est = cls(**cfg, random_state=random_state).fit(pick(fit_idx)[0], skeleton=skeleton)
+        if name in ("noise_filter", "amplitude_restorer"):  # closed form: no schedule, no checkpoint
+            if name == "noise_filter":
+                cfg = NOISE_FILTER_CONFIGS["tiny" if config == "tiny" else "default"]
+                est = cls(**cfg, random_state=random_state).fit(pick(fit_idx)[0], skeleton=skeleton)
+            else:
+                est = cls(random_state=random_state).fit(*pick(fit_idx)[:2], skeleton=skeleton, n_actions=n_actions)
             est.save(parts_dir / f"{name}.safetensors")
             (parts_dir / f"{name}.json").write_text(json.dumps({"seconds": round(time.perf_counter() - t0, 1), "split": split,
                                                                 "fit_clips": int(len(fit_idx))}, indent=1))
@@ -165,6 +171,7 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.motion_infiller = parts.get("motion_infiller")
     refiner.timing_estimator = parts.get("timing_estimator")
     refiner.noise_filter = parts.get("noise_filter")
+    refiner.amplitude_restorer = parts.get("amplitude_restorer")
     refiner.denoising = "filter" if refiner.noise_filter is not None else "flagged"
     refiner.retiming = "estimated" if refiner.timing_estimator is not None else "flagged"
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
@@ -175,7 +182,10 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
                                    **({"timing_threshold_frames": float(parts["timing_estimator"].threshold_)}
                                       if parts.get("timing_estimator") is not None else {}),
                                    **({"noise_threshold_m": float(parts["noise_filter"].threshold_)}
-                                      if parts.get("noise_filter") is not None else {})}
+                                      if parts.get("noise_filter") is not None else {}),
+                                   **({"amplitude_gate": parts["amplitude_restorer"].gate_,
+                                       "amplitude_target": parts["amplitude_restorer"].target_}
+                                      if parts.get("amplitude_restorer") is not None else {})}
     refiner.save(out or folder, half=True)
     return Refiner.load(out or folder)
 
@@ -227,4 +237,6 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
                if "timing_estimator" in parts else {}),
             **({"noise_threshold_m": parts["noise_filter"].calibrate(clips, clip_rate=clip_rate)}
                if "noise_filter" in parts else {}),
+            **(dict(zip(("amplitude_gate", "amplitude_target"), parts["amplitude_restorer"].calibrate(
+                clips, actions, clip_rate=AMPLITUDE_CLIP_RATE))) if "amplitude_restorer" in parts else {}),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}

@@ -1,0 +1,91 @@
+"""Amplitude restoration: real clips read as about 1, damped ones as damped; restoring brings them back toward
+the true clip, leaves clips above the gate exactly as given, survives saving, refuses bad input."""
+import numpy as np
+import pytest
+
+from refiner.core.validation import NotFittedError
+from refiner.refinement.amplitude import LENGTHS, AmplitudeRestorer, joint_spread
+from refiner.refinement.pipeline import Refiner
+
+
+def _damped(x, k):
+    rel = x - x[:, :1]
+    mean = rel.mean(0, keepdims=True)
+    return x[:, :1] + mean + k * (rel - mean)
+
+
+@pytest.fixture(scope="module")
+def fitted(humanact12):
+    fit = np.flatnonzero(humanact12.subjects <= 8)[::2]
+    held = np.flatnonzero(humanact12.subjects >= 9)[::3]
+    est = AmplitudeRestorer().fit([humanact12[i].joints for i in fit], humanact12.actions[fit], n_actions=12)
+    return est, [humanact12[i] for i in held]
+
+
+def test_joint_spread_is_scale_free_and_zero_at_the_root(rng):
+    x = np.cumsum(rng.normal(0, 0.01, (40, 24, 3)), 0)
+    s = joint_spread(x, "humanact12")
+    assert s.shape == (24,) and s[0] == 0 and (s[1:] > 0).all()
+    np.testing.assert_allclose(joint_spread(3.0 * x + 1.0, "humanact12"), s, rtol=1e-9)
+
+
+@pytest.mark.real_data
+def test_damped_clips_are_found_and_restored(fitted):
+    est, held = fitted
+    assert est.spread_.shape == (13, len(LENGTHS), 24) and np.isfinite(est.spread_).all()
+    gate, target = est.calibrate([m.joints for m in held], [m.action for m in held], clip_rate=0.05)
+    assert 0.3 < gate < 0.9 < target < 1.2
+    clean = [est.amplitude(m.joints[:60], m.action) for m in held]
+    damped = [est.amplitude(_damped(m.joints[:60].astype(np.float64), 0.3), m.action) for m in held]
+    assert 0.8 < np.median(clean) < 1.25 and np.median(damped) < 0.4
+    assert np.mean(np.array(damped) < gate) > 0.8 and np.mean(np.array(clean) < gate) < 0.1
+    before, after, kept = [], [], 0
+    for m in held:
+        x = m.joints[:60].astype(np.float64)
+        y = _damped(x, 0.3)
+        out, k, s = est.restore(y, m.action)
+        if s == 1.0:
+            np.testing.assert_array_equal(out, y)
+            kept += 1
+            continue
+        assert s > 1.0 and k < gate
+        before.append(np.linalg.norm(y - x, axis=-1).mean()), after.append(np.linalg.norm(out - x, axis=-1).mean())
+    assert kept < 0.2 * len(held) and np.mean(after) < 0.6 * np.mean(before), (np.mean(before), np.mean(after))
+    x = held[0].joints[:60]
+    out, k, s = est.restore(x, None)  # unknown action: every action's spreads
+    assert s == 1.0 and np.array_equal(out, x) and 0.4 < k < 3
+
+
+@pytest.mark.real_data
+def test_saved_restorer_is_the_same_and_bad_input_is_refused(fitted, tmp_path):
+    est, held = fitted
+    est.calibrate([m.joints for m in held], [m.action for m in held], clip_rate=0.05)
+    est.save(tmp_path / "a.safetensors")
+    again = AmplitudeRestorer.load(tmp_path / "a.safetensors")
+    x = held[3].joints
+    assert again.amplitude(x, 2) == pytest.approx(est.amplitude(x, 2), rel=1e-5) and again.gate_ == est.gate_
+    with pytest.raises(NotFittedError):
+        AmplitudeRestorer().amplitude(x)
+    for bad, match in (((x[:1], 0), "T >= 2"), ((x[:, :20], 0), "24, 3"), ((x, 12), "12 actions")):
+        with pytest.raises(ValueError, match=match):
+            est.amplitude(*bad)
+    with pytest.raises(ValueError, match="one int action each"):
+        AmplitudeRestorer().fit([x], [0, 1])
+    with pytest.raises(ValueError, match="32 frames"):
+        AmplitudeRestorer().fit([x[:20]], [0])
+
+
+@pytest.mark.real_data
+def test_shipped_refiner_restores_a_damped_clip_and_keeps_a_real_one(humanact12, one_torch_thread):
+    model = Refiner.pretrained("humanact12", split="train")
+    assert model.amplitude_restorer is not None and model.amplitude == "restore"
+    m = humanact12[int(np.flatnonzero(humanact12.subjects == 11)[5])]
+    x = m.joints[:60].astype(np.float64)
+    out, report = model.refine(_damped(x, 0.25).astype(np.float32), action=m.action, return_report=True)
+    assert any(c["step"] == "amplitude" for c in report.changes)
+    assert np.linalg.norm(out - x, axis=-1).mean() < 0.7 * np.linalg.norm(_damped(x, 0.25) - x, axis=-1).mean()
+    _, report = model.refine(x.astype(np.float32), action=m.action, return_report=True)
+    assert not any(c["step"] == "amplitude" for c in report.changes)
+    kept = Refiner.pretrained("humanact12", split="train", amplitude="keep")
+    _, report = kept.refine(_damped(x, 0.25).astype(np.float32), action=m.action, return_report=True)
+    assert not any(c["step"] == "amplitude" for c in report.changes)
