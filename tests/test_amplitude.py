@@ -32,7 +32,7 @@ def test_joint_spread_is_scale_free_and_zero_at_the_root(rng):
 @pytest.mark.real_data
 def test_damped_clips_are_found_and_restored(fitted):
     est, held = fitted
-    assert est.spread_.shape == (13, len(LENGTHS), 24) and np.isfinite(est.spread_).all()
+    assert est.spread_.shape == (12, len(LENGTHS), 24) and np.isfinite(est.spread_).all()
     gate, target = est.calibrate([m.joints for m in held], [m.action for m in held], clip_rate=0.05)
     assert 0.3 < gate < 0.9 < target < 1.2
     clean = [est.amplitude(m.joints[:60], m.action) for m in held]
@@ -51,9 +51,6 @@ def test_damped_clips_are_found_and_restored(fitted):
         assert s > 1.0 and k < gate
         before.append(np.linalg.norm(y - x, axis=-1).mean()), after.append(np.linalg.norm(out - x, axis=-1).mean())
     assert kept < 0.2 * len(held) and np.mean(after) < 0.6 * np.mean(before), (np.mean(before), np.mean(after))
-    x = held[0].joints[:60]
-    out, k, s = est.restore(x, None)  # unknown action: every action's spreads
-    assert s == 1.0 and np.array_equal(out, x) and 0.4 < k < 3
 
 
 @pytest.mark.real_data
@@ -65,8 +62,8 @@ def test_saved_restorer_is_the_same_and_bad_input_is_refused(fitted, tmp_path):
     x = held[3].joints
     assert again.amplitude(x, 2) == pytest.approx(est.amplitude(x, 2), rel=1e-5) and again.gate_ == est.gate_
     with pytest.raises(NotFittedError):
-        AmplitudeRestorer().amplitude(x)
-    for bad, match in (((x[:1], 0), "T >= 2"), ((x[:, :20], 0), "24, 3"), ((x, 12), "12 actions")):
+        AmplitudeRestorer().amplitude(x, 0)
+    for bad, match in (((x[:1], 0), "T >= 2"), ((x[:, :20], 0), "24, 3"), ((x, 12), "12 actions"), ((x, None), "12 actions")):
         with pytest.raises(ValueError, match=match):
             est.amplitude(*bad)
     with pytest.raises(ValueError, match="one int action each"):
@@ -79,13 +76,17 @@ def test_saved_restorer_is_the_same_and_bad_input_is_refused(fitted, tmp_path):
 def test_shipped_refiner_restores_a_damped_clip_and_keeps_a_real_one(humanact12, one_torch_thread):
     model = Refiner.pretrained("humanact12", split="train")
     assert model.amplitude_restorer is not None and model.amplitude == "restore"
-    m = humanact12[int(np.flatnonzero(humanact12.subjects == 11)[5])]
+    est = model.amplitude_restorer
+    m = next(humanact12[i] for i in np.flatnonzero(humanact12.subjects == 11)  # a clip that moves as real ones do
+             if humanact12[i].n_frames >= 60 and 0.9 < est.amplitude(humanact12[i].joints[:60], humanact12[i].action) < 1.2)
     x = m.joints[:60].astype(np.float64)
-    out, report = model.refine(_damped(x, 0.25).astype(np.float32), action=m.action, return_report=True)
+    out, report = model.refine(_damped(x, 0.15).astype(np.float32), action=m.action, return_report=True)
     assert any(c["step"] == "amplitude" for c in report.changes)
-    assert np.linalg.norm(out - x, axis=-1).mean() < 0.7 * np.linalg.norm(_damped(x, 0.25) - x, axis=-1).mean()
+    assert np.linalg.norm(out - x, axis=-1).mean() < 0.5 * np.linalg.norm(_damped(x, 0.15) - x, axis=-1).mean()
     _, report = model.refine(x.astype(np.float32), action=m.action, return_report=True)
     assert not any(c["step"] == "amplitude" for c in report.changes)
+    _, report = model.refine(_damped(x, 0.15).astype(np.float32), return_report=True)  # no action given: not judged
+    assert not any(c["step"] == "amplitude" for c in report.changes)
     kept = Refiner.pretrained("humanact12", split="train", amplitude="keep")
-    _, report = kept.refine(_damped(x, 0.25).astype(np.float32), action=m.action, return_report=True)
+    _, report = kept.refine(_damped(x, 0.15).astype(np.float32), action=m.action, return_report=True)
     assert not any(c["step"] == "amplitude" for c in report.changes)

@@ -56,7 +56,7 @@ CORRECTION_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer")
 #: Share of held-out clean clips the amplitude step may scale: it changes whole clips.
-AMPLITUDE_CLIP_RATE = 0.01
+AMPLITUDE_CLIP_RATE = 0.005
 #: The noise filter's settings (fitted in closed form: about a minute on one CPU core) and its tiny test version.
 NOISE_FILTER_CONFIGS = {"default": {}, "tiny": dict(half_width=1, copies=1)}
 #: Parts trained only when asked (``only=``): the denoiser and the motion in-filler serve options of the
