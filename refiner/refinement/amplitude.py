@@ -7,9 +7,10 @@ its FID from 8.13 to 6.88 / 5.59 / 4.05 (600 samples), so a damped clip is a fla
 per-frame repair sees. :class:`AmplitudeRestorer` measures a clip's *amplitude* ``k``: each joint's spread
 (the norm of its per-axis standard deviation over the clip, root-relative, in units of the clip's summed
 bone lengths) over the median spread of real clips of the same action and length (``spread_``, fitted on
-random crops of real clips), the median over joints; a clip whose action is not given is not judged. On held-out clean clips ``k`` is about 1 (its 1st
-percentile is ``gate_``); a clip under the gate has its root-relative motion about its mean scaled so
-that ``k`` reaches ``target_`` (the clean clips' median), faded in over the quarter of the gate below it.
+random crops of real clips), the median over joints; a clip whose action is not given is not judged.
+On held-out clean clips ``k`` is about 1 (``gate_`` is a low quantile of it, 0.5 % for the shipped
+weights); a clip under the gate has its root-relative motion about its mean scaled so that ``k`` reaches
+``target_`` (the clean clips' median), faded in over the quarter of the gate below it.
 The root path, the clip's mean pose and its timing are kept; the pipeline puts the frames back on the
 clip's bone lengths.
 """

@@ -40,10 +40,9 @@ from refiner.refinement.training_flaws import GROUPS
 __all__ = ["flag_runs", "noise_ratio", "NOISE_RATIO", "refine_clips", "refine_batch", "check_detect", "REPAIRS", "DETECTORS", "STAND_INS"]
 
 #: ``repair="typed"``: per flagged run, the repair for the flaw group the classifier recognises
-#: (:data:`TYPED_REPAIRS`); ``"select"``: per flagged run, the candidate (the repair network's two proposals, the
-#: hand-written repairs of :mod:`refiner.refinement.repair_candidates`, or no change) that the flaw classifier
-#: finds most real; ``"given"``: the network sees the flagged frames (denoises small flaws, replaces
-#: large ones); ``"infill"``: they are hidden and in-filled from the context alone.
+#: (:data:`TYPED_REPAIRS`); ``"select"``: the candidate (the repair network's two proposals, the hand-written
+#: repairs of :mod:`refiner.refinement.repair_candidates`, or no change) the flaw classifier finds most real;
+#: ``"given"``: the network sees the flagged frames; ``"infill"``: they are hidden and in-filled from the context.
 REPAIRS = ("typed", "select", "given", "infill")
 _GROUP_NAMES = tuple(GROUPS)
 #: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many
@@ -97,12 +96,8 @@ _GROUP_NAMES = tuple(GROUPS)
 #:   re-timing only where a rush follows the stop (``stall_retime_run(rush=1.5)``): every figure here
 #:   unchanged (its reason lies in the benchmark subjects: a time-warped clip that ends at rest was
 #:   re-timed over its rest, +4.7 cm; time_warp there -1.1 -> -0.4 %).
-#: - noise -> the learned noise filter (:mod:`refiner.refinement.noise_filter`) at each frame's estimated
-#:   level instead of smoothing: jitter +22.7 -> +23.0 % (with the true jittered frames 37.2 % against
-#:   smoothing's 22.9 %: detection, not the repair, now limits it); **+18.6 %** in all. Its last step for
-#:   clips noisy throughout (``Refiner(denoising=)``) costs 0.3 points there (jitter 23.0 -> 22.3 %, 3.5 %
-#:   of clean clips touched, 0.016 cm on average: **+18.3 %**) and takes a2m's FID 4.286 -> 4.110 (600
-#:   samples); at the clip's median level, uncapped: 17.9 % and 3.943.
+#: - noise -> the learned noise filter (:mod:`refiner.refinement.noise_filter`): jitter +22.7 -> +23.0 %;
+#:   with its last step (clips noisy throughout) 22.3 %, **+18.3 %** in all (README, table of choices).
 TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet", 0), "pose": ("planted_feet", 0),
                  "noise": ("noise_filter", 0)}
 #: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
@@ -115,12 +110,11 @@ VERIFY_TYPED = ("root", "pose")
 #: Gaussian smoothing of sigma 1 frame) than its clip's median frame: noise is a local flaw, and a
 #: clip that is as rough everywhere has that texture from its generator (see :func:`noise_ratio`).
 NOISE_RATIO = 1.3
-#: A timing run is grown over the stall before it and the rush after it (:func:`stall_window`) before
-#: it is re-timed; False: the widened run alone, as in the previous release (frozen 58.9 % vs 50.6 %).
+#: A timing run is grown over the stall before it and the rush after it (:func:`stall_window`) before it
+#: is re-timed; False: the widened run alone (frozen 58.9 % vs 50.6 %).
 STALL_WINDOW = True
-#: Detectors that can flag frames (``detect="classifier+recognizer"`` takes the union): the kinematic
-#: flaw classifier, the recognition network's flaw probability, the repair network's correction of
-#: the whole clip (how far it would move each frame), the denoiser's correction of the whole clip.
+#: Detectors that can flag frames (``detect="classifier+recognizer"`` takes the union): the kinematic flaw
+#: classifier, the recognition network's flaw probability, the repair network's or the denoiser's correction.
 DETECTORS = ("classifier", "recognizer", "correction", "denoiser")
 
 
@@ -132,8 +126,7 @@ def check_detect(detect: str) -> str:
     return detect
 
 
-#: The hand-written repair that stands in for a network's proposal when the weights lack that network
-#: (weights trained before the denoiser existed smooth noise instead).
+#: The hand-written repair that stands in for a network's proposal when the weights lack that network.
 STAND_INS = {"denoise": "smooth", "motion_infill": "network_infill", "noise_filter": "smooth"}
 _ANCHOR_THRESHOLD = 0.3
 #: Frames on each side of a run that the selection's flaw score also covers (the seams).
@@ -360,8 +353,12 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
             proposals["network_infill"] = refiner.flaw_repairer.repair(clips[todo], suspect[todo], acts, hide=True)
         if "denoise" in typed and refiner.flaw_denoiser is not None:
             proposals["denoise"] = refiner.flaw_denoiser.denoise(clips[todo], suspect[todo])
-        if "noise_filter" in typed and getattr(refiner, "noise_filter", None) is not None:
-            proposals["noise_filter"] = refiner.noise_filter.denoise(clips[todo])
+        if "noise_filter" in typed and getattr(refiner, "noise_filter", None) is not None:  # clips with noise runs only
+            noisy = [k for k, b in enumerate(todo) if any(_GROUP_NAMES[int(np.argmax(groups[b][lo:hi].mean(0)))] == "noise"
+                                                          for (lo, hi), _ in runs_per_clip[b])]
+            proposals["noise_filter"] = clips[todo].copy()
+            if noisy:
+                proposals["noise_filter"][noisy] = refiner.noise_filter.denoise(clips[todo][noisy])
         if "motion_infill" in typed and refiner.motion_infiller is not None:
             proposals["motion_infill"] = refiner.motion_infiller.infill(clips[todo], suspect[todo])
         skel = get_skeleton(refiner.skeleton)

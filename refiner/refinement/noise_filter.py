@@ -71,9 +71,9 @@ class NoiseFilterNet(nn.Module):
         self.weight = nn.Parameter(torch.zeros(n_levels, n_features, 3 * n_joints))
         self.bias = nn.Parameter(torch.zeros(n_levels, 3 * n_joints))
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, levels: slice = slice(None)) -> torch.Tensor:
         f = window_features(x, self.half_width, self.root)
-        c = torch.einsum("btf,lfd->bltd", f, self.weight) + self.bias[None, :, None]
+        c = torch.einsum("btf,lfd->bltd", f, self.weight[levels]) + self.bias[levels][None, :, None]
         return rearrange(c, "b l t (j c) -> b l t j c", c=3)
 
 
@@ -168,29 +168,35 @@ class NoiseFilter(NetworkComponent):
             net.weight.data[level] = torch.from_numpy(solution[:-1]).float()
             net.bias.data[level] = torch.from_numpy(solution[-1]).float()
         self.network_ = net.eval()
-        rms = [np.median(np.concatenate([self._rms(self._corrections((self._noisy(c, s, rng) if s else c)[None]))[0]
+        rms = [np.median(np.concatenate([self._rms(self._reference((self._noisy(c, s, rng) if s else c)[None]))[0]
                                          for c in clips]))
                for s in (0.0, *levels)]
         self.level_rms_ = [float(v) for v in np.maximum.accumulate(rms)]
         return self
 
     @torch.no_grad()
-    def _corrections(self, x: np.ndarray) -> np.ndarray:
-        return self.network_(torch.from_numpy(np.array(x, np.float32))).numpy()
+    def _corrections(self, x: np.ndarray, levels: slice = slice(None)) -> np.ndarray:
+        """``(B, L, T, J, 3)`` metres: the bank's corrections (only ``levels`` of it: the noise estimate needs
+        the reference filter alone, a third of the work)."""
+        return self.network_(torch.from_numpy(np.array(x, np.float32)), levels).numpy()
+
+    def _reference(self, x: np.ndarray) -> np.ndarray:
+        ref = self.levels.index(0.01)
+        return self._corrections(x, slice(ref, ref + 1))
 
     def _rms(self, corrections: np.ndarray) -> np.ndarray:
-        """``(B, T)`` metres: the reference filter's correction (of the bank's ``(B, L, T, J, 3)``), less its slow part,
+        """``(B, T)`` metres: the reference filter's correction ``(B, 1, T, J, 3)``, less its slow part,
         root-mean-square over joints and over ``window`` frames. White noise asks for corrections as
         white as itself; a drifting or wrong pose asks for slow ones (without this high-pass, 79 % of
         the benchmark's drifting clips read as noisy throughout)."""
-        c = corrections[:, self.levels.index(0.01)]
+        c = corrections[:, 0]
         c = c - gaussian_filter1d(c, _SLOW, axis=1, mode="nearest")
         return np.sqrt(np.maximum(uniform_filter1d((c ** 2).sum(-1).mean(-1), self.window, axis=1, mode="nearest"), 0.0))
 
     def noise_level(self, joints: np.ndarray) -> np.ndarray:
         """``(B, T)`` metres: each frame's estimated noise level (0 for the training clips' median clean frame)."""
         check_is_fitted(self, "network_", msg=NOT_FITTED)
-        return self._levels(self._corrections(np.asarray(joints, np.float32)))
+        return self._levels(self._reference(np.asarray(joints, np.float32)))
 
     def _levels(self, corrections: np.ndarray) -> np.ndarray:
         rms = self._rms(corrections)
@@ -222,8 +228,7 @@ class NoiseFilter(NetworkComponent):
         """Every frame of a batch ``(B, T, J, 3)`` metres denoised at its own estimated level (for frames
         known to be noisy); ``(B, T, J, 3)`` float32."""
         x = self._checked(joints)
-        c = self._corrections(x)
-        return self._at_level(x, self._levels(c), c).astype(np.float32)
+        return self._at_level(x, self._levels(self._reference(x)), self._corrections(x)).astype(np.float32)
 
     def clip_noise_level(self, joints: np.ndarray) -> np.ndarray:
         """``(B,)`` metres: each clip's level, the ``clip_quantile`` of its frames' estimates (noise *throughout*,
@@ -236,15 +241,14 @@ class NoiseFilter(NetworkComponent):
         """Clips ``(B, T, J, 3)`` metres whose :meth:`clip_noise_level` passes ``threshold_`` denoised, every
         frame at the clip's level (moves capped by ``max_move``); returns ``(joints float32, levels (B,))`` (the other clips exactly as given)."""
         x = self._checked(joints)
-        c = self._corrections(x)
-        frames = self._levels(c)
+        frames = self._levels(self._reference(x))
         levels = np.quantile(frames, self.clip_quantile, axis=1)
         noisy = levels > self.threshold_
         if noisy.any():
             given = x[noisy]
             level = np.broadcast_to(levels[noisy, None], frames[noisy].shape).copy()
             weight = np.clip(frames[noisy] / self.threshold_ - 1.0, 0.0, 1.0)[..., None, None]
-            move = self._at_level(given, level, c[noisy]) - given
+            move = self._at_level(given, level, self._corrections(given)) - given
             if self.max_move is not None:
                 cap = self.max_move * np.sqrt(3.0) * level[..., None]
                 move *= np.minimum(1.0, cap / np.maximum(np.linalg.norm(move, axis=-1), 1e-12))[..., None]
