@@ -40,7 +40,8 @@ def test_damped_clips_are_found_and_restored(fitted):
     assert 0.8 < np.median(clean) < 1.25 and np.median(damped) < 0.4
     assert np.mean(np.array(damped) < gate) > 0.8 and np.mean(np.array(clean) < gate) < 0.1
     before, after, kept = [], [], 0
-    for m in held:
+    long = [m for m in held if m.n_frames >= LENGTHS[0]]  # shorter ones are never scaled (below)
+    for m in long:
         x = m.joints[:60].astype(np.float64)
         y = _damped(x, 0.3)
         out, k, s = est.restore(y, m.action)
@@ -50,7 +51,12 @@ def test_damped_clips_are_found_and_restored(fitted):
             continue
         assert s > 1.0 and k < gate
         before.append(np.linalg.norm(y - x, axis=-1).mean()), after.append(np.linalg.norm(out - x, axis=-1).mean())
-    assert kept < 0.2 * len(held) and np.mean(after) < 0.6 * np.mean(before), (np.mean(before), np.mean(after))
+    assert kept < 0.2 * len(long) and np.mean(after) < 0.6 * np.mean(before), (np.mean(before), np.mean(after))
+    for m in [m for m in held if m.n_frames >= 16]:  # under 32 frames a clip spreads less than any fitted length: never scaled
+        y = _damped(m.joints[:16].astype(np.float64), 0.2)
+        out, k, s = est.restore(y, m.action)
+        assert s == 1.0 and np.array_equal(out, y)
+    assert est.scale(1e-6) == est.max_scale == 10.0 and est.scale(est.gate_) == 1.0
 
 
 @pytest.mark.real_data
@@ -63,13 +69,16 @@ def test_saved_restorer_is_the_same_and_bad_input_is_refused(fitted, tmp_path):
     assert again.amplitude(x, 2) == pytest.approx(est.amplitude(x, 2), rel=1e-5) and again.gate_ == est.gate_
     with pytest.raises(NotFittedError):
         AmplitudeRestorer().amplitude(x, 0)
-    for bad, match in (((x[:1], 0), "T >= 2"), ((x[:, :20], 0), "24, 3"), ((x, 12), "12 actions"), ((x, None), "12 actions")):
+    for bad, match in (((x[:1], 0), "T >= 2"), ((x[:, :20], 0), "24, 3"), ((x, 12), "12 actions"), ((x, None), "12 actions"),
+                       ((x, "1"), "12 actions"), ((x, 1.7), "12 actions"), ((x, True), "12 actions")):
         with pytest.raises(ValueError, match=match):
             est.amplitude(*bad)
     with pytest.raises(ValueError, match="one int action each"):
         AmplitudeRestorer().fit([x], [0, 1])
     with pytest.raises(ValueError, match="32 frames"):
         AmplitudeRestorer().fit([x[:20]], [0])
+    with pytest.raises(ValueError, match="actions must be in 0..1"):
+        AmplitudeRestorer().fit([x, x], [0, 2], n_actions=2)
 
 
 @pytest.mark.real_data

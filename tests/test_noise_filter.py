@@ -1,5 +1,7 @@
 """The learned noise filter: fitted on real clips, it removes white noise better than smoothing, leaves clean
 clips alone, survives float16 storage, refuses bad input, and runs as the refiner's noise steps."""
+import copy
+
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter1d
@@ -48,12 +50,18 @@ def test_filter_removes_white_noise_better_than_smoothing(fitted, rng):
     assert np.mean(after) < np.mean(smooth), (np.mean(smooth), np.mean(after))
     assert 0.006 < np.median(levels) < 0.015 and np.median(clean_levels) < 0.004
     still = np.repeat(held[0][:1], 30, axis=0)[None] + np.float32(1e-3)  # running sums of zeros: no NaN
-    assert np.isfinite(nf.noise_level(still)).all() and np.array_equal(nf.denoise_clips(still)[0], still)
+    calibrated = copy.deepcopy(nf)
+    assert calibrated.calibrate(held[30:40], clip_rate=0.5) >= 1e-4  # most clean levels are 0: never a 0 threshold
+    assert np.isfinite(nf.noise_level(still)).all() and np.array_equal(calibrated.denoise_clips(still)[0], still)
+    clip = next(c for c in held if len(c) >= 60)[None, :60]
+    noisy = (clip + 0.01 * rng.normal(size=clip.shape)).astype(np.float32)
+    out, levels = calibrated.denoise_clips(noisy)
+    assert levels[0] > calibrated.threshold_ and np.isfinite(out).all() and not np.array_equal(out, noisy)
 
 
 @pytest.mark.real_data
 def test_only_clips_noisy_throughout_change(fitted, rng, tmp_path):
-    nf, held = fitted
+    nf, held = copy.deepcopy(fitted[0]), fitted[1]  # calibrated here, not in the shared fixture
     threshold = nf.calibrate(held[30:], clip_rate=0.1)
     assert 0 < threshold < 0.01
     clean = np.stack([c[:40] for c in held[:20] if len(c) >= 40])
@@ -76,8 +84,9 @@ def test_only_clips_noisy_throughout_change(fitted, rng, tmp_path):
 def test_unfitted_and_bad_input_are_refused(fitted):
     with pytest.raises(NotFittedError):
         NoiseFilter().denoise(np.zeros((1, 10, 24, 3), np.float32))
-    with pytest.raises(ValueError, match="including 0.01"):
-        NoiseFilter(levels=(0.02, 0.04)).fit([np.zeros((10, 24, 3))])
+    for levels in ((0.02, 0.04), (0.01,)):
+        with pytest.raises(ValueError, match="two or more .* including 0.01"):
+            NoiseFilter(levels=levels).fit([np.zeros((10, 24, 3))])
     with pytest.raises(ValueError, match="non-empty list"):
         NoiseFilter().fit([np.zeros((1, 24, 3))])
     nf, held = fitted

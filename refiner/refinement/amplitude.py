@@ -53,6 +53,8 @@ class AmplitudeRestorer(BaseEstimator):
         Random crops per real clip and length when fitting.
     fade : float, default=0.25
         The scaling fades in from nothing at ``gate_`` to full at ``(1 - fade) gate_``.
+    max_scale : float, default=10.0
+        The largest factor a clip is scaled by (a clip that barely moves is not made to move at any cost).
     random_state : int or None, default=0
 
     Attributes
@@ -64,9 +66,10 @@ class AmplitudeRestorer(BaseEstimator):
         until then, which restores nothing).
     """
 
-    def __init__(self, *, crops: int = 3, fade: float = 0.25, random_state: int | None = 0):
+    def __init__(self, *, crops: int = 3, fade: float = 0.25, max_scale: float = 10.0, random_state: int | None = 0):
         self.crops = crops
         self.fade = fade
+        self.max_scale = max_scale
         self.random_state = random_state
 
     def fit(self, clips, actions, *, skeleton: str = "humanact12", n_actions: int | None = None) -> "AmplitudeRestorer":
@@ -75,6 +78,8 @@ class AmplitudeRestorer(BaseEstimator):
         actions = np.asarray(actions)
         if len(clips) == 0 or len(actions) != len(clips) or not np.issubdtype(actions.dtype, np.integer):
             raise ValueError(f"fit needs clips and one int action each; got {len(clips)} clips, {len(actions)} actions.")
+        if actions.min() < 0 or (n_actions is not None and actions.max() >= n_actions):
+            raise ValueError(f"actions must be in 0..{(n_actions or actions.max() + 1) - 1}; got {sorted(set(actions.tolist()))}.")
         if self.crops < 1 or not 0 < self.fade < 1:
             raise ValueError(f"`crops` must be >= 1 and `fade` in (0, 1); got {self.crops}, {self.fade}.")
         self.skeleton_ = get_skeleton(skeleton).name
@@ -103,7 +108,7 @@ class AmplitudeRestorer(BaseEstimator):
         return self
 
     def _reference(self, length: int, action) -> np.ndarray:
-        if action is None or not 0 <= int(action) < self.n_actions_:
+        if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)) or not 0 <= action < self.n_actions_:
             raise ValueError(f"action {action!r} is not one of the {self.n_actions_} actions the restorer knows.")
         row = int(action)
         pos = np.interp(np.log(length), np.log(LENGTHS), np.arange(len(LENGTHS)))
@@ -123,11 +128,11 @@ class AmplitudeRestorer(BaseEstimator):
         return float(np.median(np.delete(ratio, root)))
 
     def scale(self, k: float) -> float:
-        """The factor by which a clip of amplitude ``k`` is scaled (1 at or above the gate)."""
+        """The factor by which a clip of amplitude ``k`` is scaled (1 at or above the gate; at most ``max_scale``)."""
         if k >= self.gate_ or k <= 0:
             return 1.0
         w = min(1.0, (self.gate_ - k) / (self.fade * self.gate_))
-        return (k + w * (self.target_ - k)) / k
+        return min((k + w * (self.target_ - k)) / k, self.max_scale)
 
     def calibrate(self, clips, actions, *, clip_rate: float = 0.01) -> tuple[float, float]:
         """Set ``gate_`` to the ``clip_rate`` quantile of these clean clips' amplitudes (held-out subjects; each
@@ -148,9 +153,10 @@ class AmplitudeRestorer(BaseEstimator):
 
     def restore(self, joints: np.ndarray, action: int) -> tuple[np.ndarray, float, float]:
         """``(joints, k, scale)``: one clip ``(T, J, 3)`` with its root-relative motion about its mean scaled
-        by :meth:`scale` (bones not yet put back on their lengths), a copy as given when it is 1."""
+        by :meth:`scale` (bones not yet put back on their lengths), a copy as given when it is 1 (always for
+        clips under ``LENGTHS[0]`` frames, which spread less than any length the real spreads were measured at)."""
         k = self.amplitude(joints, action)
-        s = self.scale(k)
+        s = self.scale(k) if len(joints) >= LENGTHS[0] else 1.0
         x = np.array(joints, copy=True)
         if s != 1.0:
             root = get_skeleton(self.skeleton_).root
@@ -188,8 +194,8 @@ def restored_amplitude(refiner, clips: np.ndarray, actions: list, reports: list)
     out = clips.copy()
     every = np.ones(clips.shape[1], bool)
     for b, (action, report) in enumerate(zip(actions, reports)):
-        if action is None or not 0 <= action < restorer.n_actions_:
-            continue
+        if action is None or not 0 <= action < restorer.n_actions_ or len(clips[b]) < LENGTHS[0]:
+            continue  # shorter clips spread less than any length the real spreads were measured at
         scaled, k, s = restorer.restore(clips[b], action)
         if s == 1.0:
             continue

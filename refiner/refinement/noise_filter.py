@@ -43,6 +43,8 @@ __all__ = ["NoiseFilter", "NoiseFilterNet", "window_features", "filtered_noise",
 #: Noise levels (standard deviation per coordinate, metres) of the filter bank; the reference level
 #: that estimates the noise is 1 cm.
 NOISE_LEVELS = (0.005, 0.01, 0.02)
+#: Metres: the lowest threshold :meth:`NoiseFilter.calibrate` sets (most clean clips' level is exactly 0).
+_MIN_THRESHOLD = 1e-4
 #: Frames (Gaussian sigma) of the slow part of a correction that the noise estimate leaves out.
 _SLOW = 2.0
 
@@ -142,8 +144,9 @@ class NoiseFilter(NetworkComponent):
     def fit(self, clips, *, skeleton: str = "humanact12") -> "NoiseFilter":
         """Fit the bank on real clips ``(T_i, J, 3)`` metres (T_i >= 2), each with ``copies`` noisy copies per level."""
         levels = tuple(float(v) for v in self.levels)
-        if not levels or min(levels) <= 0 or list(levels) != sorted(set(levels)) or 0.01 not in levels:
-            raise ValueError(f"`levels` must be increasing positive noise levels (metres) including 0.01; got {self.levels}.")
+        if len(levels) < 2 or min(levels) <= 0 or list(levels) != sorted(set(levels)) or 0.01 not in levels:
+            raise ValueError(f"`levels` must be two or more increasing positive noise levels (metres) including 0.01; "
+                             f"got {self.levels}.")
         if self.half_width < 1 or self.copies < 1 or self.window < 1:
             raise ValueError("`half_width`, `copies` and `window` must be >= 1.")
         rng = check_random_state(self.random_state)
@@ -181,7 +184,7 @@ class NoiseFilter(NetworkComponent):
         return self.network_(torch.from_numpy(np.array(x, np.float32)), levels).numpy()
 
     def _reference(self, x: np.ndarray) -> np.ndarray:
-        ref = self.levels.index(0.01)
+        ref = tuple(float(v) for v in self.levels).index(0.01)
         return self._corrections(x, slice(ref, ref + 1))
 
     def _rms(self, corrections: np.ndarray) -> np.ndarray:
@@ -262,7 +265,8 @@ class NoiseFilter(NetworkComponent):
         if len(clips) == 0 or not 0 < clip_rate < 1:
             raise ValueError(f"calibrate needs clean clips and 0 < clip_rate < 1; got {len(clips)} clips, clip_rate {clip_rate}.")
         levels = [float(self.clip_noise_level(np.asarray(c, np.float32)[None])[0]) for c in clips]
-        self.threshold_ = float(np.quantile(levels, 1 - clip_rate))
+        # most clean clips' level is exactly 0: a rate that reaches them must not give a threshold of 0
+        self.threshold_ = max(float(np.quantile(levels, 1 - clip_rate)), _MIN_THRESHOLD)
         return self.threshold_
 
 
@@ -276,7 +280,7 @@ def filtered_noise(refiner, clips: np.ndarray, reports: list) -> np.ndarray:
     denoised, levels = noise_filter.denoise_clips(clips)
     out = clips.copy()
     for b in np.flatnonzero(levels > noise_filter.threshold_):
-        changed = np.abs(denoised[b] - clips[b]).reshape(len(clips[b]), -1).max(-1) > 0
+        changed = (denoised[b] != clips[b]).reshape(len(clips[b]), -1).any(-1)
         if not changed.any():
             continue
         out[b] = project_bone_lengths(denoised[b], reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
