@@ -4,7 +4,8 @@
 (flaw recognition and repair networks, :mod:`refiner.refinement.learned_pipeline`, the default) or
 ``"concepts"`` (anchor scores and transition residuals, with the paper's variants as options,
 :mod:`refiner.refinement.concepts_pipeline`). Do no harm: only flagged frames change, spliced in
-without jumps and put back on the input's bone lengths (:mod:`refiner.refinement.splicing`).
+without jumps and put back on the input's bone lengths (:mod:`refiner.refinement.splicing`), but for
+the steps that judge a clip as a whole (stretching bones, damped amplitude, noise throughout).
 """
 from __future__ import annotations
 
@@ -343,8 +344,8 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
 
     Returns
     -------
-    The same kind as ``seq`` (Motion, numpy array or torch tensor), refined; frames that were not
-    flagged are returned exactly as given. The input is never modified.
+    The same kind as ``seq`` (Motion, numpy array or torch tensor), refined; frames that no step changed
+    (each change is in the report) are returned exactly as given. The input is never modified.
 
     dtypes and tensors: refinement runs in float32; a floating input (float64, float16, bfloat16) comes
     back in its own dtype, unchanged frames bit-identical, others as float32. A tensor comes back on its
