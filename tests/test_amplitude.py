@@ -67,6 +67,9 @@ def test_saved_restorer_is_the_same_and_bad_input_is_refused(fitted, tmp_path):
     again = AmplitudeRestorer.load(tmp_path / "a.safetensors")
     x = held[3].joints
     assert again.amplitude(x, 2) == pytest.approx(est.amplitude(x, 2), rel=1e-5) and again.gate_ == est.gate_
+    a, b = [m.joints[:40] for m in held if m.n_frames >= 40][:2]  # a batch in one pass is each clip alone
+    np.testing.assert_allclose(est.amplitudes(np.stack([a, b]), [2, 3]), [est.amplitude(a, 2), est.amplitude(b, 3)],
+                               rtol=1e-12)
     with pytest.raises(NotFittedError):
         AmplitudeRestorer().amplitude(x, 0)
     for bad, match in (((x[:1], 0), "T >= 2"), ((x[:, :20], 0), "24, 3"), ((x, 12), "12 actions"), ((x, None), "12 actions"),

@@ -35,13 +35,14 @@ _NOT_FITTED = "This AmplitudeRestorer is not fitted yet; call fit() or load() fi
 
 
 def joint_spread(joints: np.ndarray, skeleton: str) -> np.ndarray:
-    """``(J,)`` for a clip ``(T, J, 3)`` metres: each joint's spread over the clip, the norm of its per-axis
-    standard deviation relative to the root, in units of the clip's summed bone lengths (the root's is 0)."""
+    """``(..., J)`` for clips ``(..., T, J, 3)`` metres: each joint's spread over its clip, the norm of its
+    per-axis standard deviation relative to the root, in units of the clip's summed bone lengths (the
+    root's is 0)."""
     x = np.asarray(joints, np.float64)
     skel = get_skeleton(skeleton)
-    size = float(np.median(bone_lengths(x, skel.name).sum(-1)))
-    rel = (x - x[:, skel.root : skel.root + 1]) / max(size, 1e-9)
-    return np.linalg.norm(rel.std(0), axis=-1)
+    size = np.median(bone_lengths(x, skel.name).sum(-1), axis=-1)
+    rel = (x - x[..., skel.root : skel.root + 1, :]) / np.maximum(size, 1e-9)[..., None, None, None]
+    return np.linalg.norm(rel.std(-3), axis=-1)
 
 
 class AmplitudeRestorer(BaseEstimator):
@@ -119,13 +120,21 @@ class AmplitudeRestorer(BaseEstimator):
     def amplitude(self, joints: np.ndarray, action: int) -> float:
         """``k`` of one clip ``(T, J, 3)`` metres of action ``action``: its joints' spread over real clips' of
         its action and length, the median over joints (1: as real motion moves)."""
+        x = np.asarray(joints)
+        if x.ndim != 3:
+            raise ValueError(f"`joints` must be (T >= 2, {getattr(self, 'n_joints_', 'J')}, 3); got shape {x.shape}.")
+        return float(self.amplitudes(x[None], [action])[0])
+
+    def amplitudes(self, joints: np.ndarray, actions) -> np.ndarray:
+        """``(B,)``: :meth:`amplitude` of a batch ``(B, T, J, 3)`` metres with one action per clip, in one pass."""
         check_is_fitted(self, "spread_", msg=_NOT_FITTED)
         x = np.asarray(joints)
-        if x.ndim != 3 or x.shape[1:] != (self.n_joints_, 3) or len(x) < 2:
-            raise ValueError(f"`joints` must be (T >= 2, {self.n_joints_}, 3); got shape {x.shape}.")
-        ratio = joint_spread(x, self.skeleton_) / np.maximum(self._reference(len(x), action), 1e-9)
-        root = get_skeleton(self.skeleton_).root
-        return float(np.median(np.delete(ratio, root)))
+        if x.ndim != 4 or x.shape[2:] != (self.n_joints_, 3) or x.shape[1] < 2 or len(actions) != len(x):
+            raise ValueError(f"`joints` must be (B, T >= 2, {self.n_joints_}, 3) with one action per clip; got shape "
+                             f"{x.shape}, {len(actions)} actions.")
+        reference = np.stack([self._reference(x.shape[1], a) for a in actions])
+        ratio = joint_spread(x, self.skeleton_) / np.maximum(reference, 1e-9)
+        return np.median(np.delete(ratio, get_skeleton(self.skeleton_).root, axis=-1), axis=-1)
 
     def scale(self, k: float) -> float:
         """The factor by which a clip of amplitude ``k`` is scaled (1 at or above the gate; at most ``max_scale``)."""
@@ -157,13 +166,16 @@ class AmplitudeRestorer(BaseEstimator):
         clips under ``LENGTHS[0]`` frames, which spread less than any length the real spreads were measured at)."""
         k = self.amplitude(joints, action)
         s = self.scale(k) if len(joints) >= LENGTHS[0] else 1.0
+        return self._scaled(joints, s), k, s
+
+    def _scaled(self, joints: np.ndarray, s: float) -> np.ndarray:
         x = np.array(joints, copy=True)
         if s != 1.0:
             root = get_skeleton(self.skeleton_).root
             rel = x - x[:, root : root + 1]
             mean = rel.mean(0, keepdims=True)
             x = (x[:, root : root + 1] + mean + s * (rel - mean)).astype(x.dtype)
-        return x, k, s
+        return x
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the fitted spreads and calibration to one ``.safetensors`` file."""
@@ -193,12 +205,15 @@ def restored_amplitude(refiner, clips: np.ndarray, actions: list, reports: list)
         return clips
     out = clips.copy()
     every = np.ones(clips.shape[1], bool)
-    for b, (action, report) in enumerate(zip(actions, reports)):
-        if action is None or not 0 <= action < restorer.n_actions_ or len(clips[b]) < LENGTHS[0]:
-            continue  # shorter clips spread less than any length the real spreads were measured at
-        scaled, k, s = restorer.restore(clips[b], action)
+    judged = [b for b, a in enumerate(actions) if a is not None and 0 <= a < restorer.n_actions_]
+    if clips.shape[1] < LENGTHS[0] or not judged:  # shorter clips spread less than any fitted length
+        return out
+    ks = restorer.amplitudes(clips[judged], [actions[b] for b in judged])
+    for b, k in zip(judged, ks):
+        s, report = restorer.scale(float(k)), reports[b]
         if s == 1.0:
             continue
+        scaled = restorer._scaled(clips[b], s)
         out[b] = project_bone_lengths(scaled, reference_lengths(clips[b], refiner.skeleton), every, refiner.skeleton)
         moved = 100 * float(np.linalg.norm(out[b] - clips[b], axis=-1).mean())
         report.changes.append({"start": 0, "stop": clips.shape[1], "step": "amplitude", "repair": "amplitude_restore",
