@@ -120,6 +120,9 @@ def test_bench_samples_quick(tmp_path):
     assert 0.0 <= rec["refined"]["accuracy"] <= 1.0 and rec["frames_changed"] == 1.0
     assert len(rec["reports"]) == 5 and all(r["changes"][0]["step"] == "skeleton" for r in rec["reports"])
     assert all("median bone lengths" in r["changes"][0]["reason"] for r in rec["reports"])
+    snapped = rec["snapped"]  # the concept-snap option moves every clip (all have their labels) and keeps bones rigid
+    assert snapped["frames_changed"] > 0.9 and snapped["bone_length_variation"] < 0.01
+    assert 0.0 <= snapped["accuracy"] <= 1.0
     ntu = rec["ntu13"]  # the 18-joint samples, refined through the HumanAct12 weights with the action unknown
     assert ntu["clips"] == 5 and 0.0 <= ntu["refined"]["accuracy"] <= 1.0
     assert ntu["refined"]["bone_length_variation"] < 0.5 * ntu["generated"]["bone_length_variation"]

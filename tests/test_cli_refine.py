@@ -156,3 +156,15 @@ def test_batch_file_errors_name_the_clip(clip, tmp_path, capsys):
     np.save(tmp_path / "cm_batch.npy", np.stack([clip[:40], clip[:40] * 100]))
     assert main(["refine", str(tmp_path / "cm_batch.npy"), "-o", str(tmp_path / "out")]) == 1
     assert "clip 1 of 2" in (err := capsys.readouterr().err) and "centimetres" in err
+
+
+@pytest.mark.real_data
+def test_concept_snap_option(clip, tmp_path, capsys):
+    src, out = tmp_path / "walk.npy", tmp_path / "snapped.npy"
+    np.save(src, clip)
+    assert main(["refine", str(src), "-o", str(out), "--action", "walk", "--concept-snap", "1", "--report"]) == 0
+    report = json.loads((tmp_path / "snapped.report.json").read_text())
+    assert "concept_snap" in [c["step"] for c in report["clips"][0]["changes"]]
+    assert np.abs(np.load(out) - clip).max() > 0.01  # the real walk that needs nothing is snapped all the same
+    assert main(["refine", str(src), "-o", str(out), "--concept-snap", "2", "--force"]) == 2
+    assert "concept_snap" in capsys.readouterr().err

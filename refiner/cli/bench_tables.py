@@ -156,7 +156,8 @@ def _generators(rec: dict) -> str:
         f"1-10, reference: {rec['reference_clips']} clips of subjects 11-12)", "",
         "The generators were trained on subjects 1-10 (`motion-refiner train-generator`). Each sample is "
         "converted by the `action2motion` adapter and refined with its sampled action by "
-        "`Refiner.pretrained(split=\"train\")`. Metrics follow the Action2Motion protocol "
+        "`Refiner.pretrained(split=\"train\")` (`snapped`: the same with the concept-snap option, `concept_snap=1`). "
+        "Metrics follow the Action2Motion protocol "
         f"(`refiner.evaluation.metrics.evaluate`, random GRU hidden state, {rec['n_replications']} replications, "
         "mean ± 95 % interval), real crops drawn with the generated action mixture. Accuracy is the recogniser's on "
         "the samples.", "",
@@ -213,6 +214,9 @@ def _samples_part(title: str, recogniser: str, rec: dict, accuracy_target: str) 
     return [f"## {title}", "", markdown_table(["figure", "generated", "refined", "target"], rows), "",
             "Changes by step (over all clips): " + (", ".join(f"{k} {v}" for k, v in rec["changes_by_step"].items())
                                                   or "none") + ".", "",
+            *([f"With the concept-snap option (`concept_snap=1`): accuracy {100 * rec['snapped']['accuracy']:.2f} %, "
+               f"bone-length variation {100 * rec['snapped']['bone_length_variation']:.3f} %, "
+               f"{100 * rec['snapped']['frames_changed']:.0f} % of frames changed.", ""] if "snapped" in rec else []),
             "First clip's report: " + (json.dumps(rec["reports"][0]["changes"]) if rec["reports"] else "-")]
 
 

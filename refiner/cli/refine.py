@@ -42,6 +42,9 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mode", default="full", choices=["full", "anchor", "transition"])
     p.add_argument("--fps", type=float, default=20.0, help="frame rate of joint files (default 20)")
     p.add_argument("--refiner", type=Path, default=None, help="folder of a saved refiner (default: shipped weights)")
+    p.add_argument("--concept-snap", type=float, default=0.0, metavar="W",
+                   help="move every anchor W of the way (0-1) onto its action's nearest anchor concept; needs "
+                        "--action; realism over fidelity (default 0: off)")
     p.add_argument("--report", action="store_true", help="write <out>.report.json next to each output")
     p.add_argument("--gif", action="store_true", help="write a before/after <out>.gif next to each output")
     gif_size_argument(p)
@@ -77,7 +80,8 @@ def refine_run(args: argparse.Namespace) -> int:
         targets = [args.out if args.out.suffix.lower() == ".npy" else args.out / (args.input.stem + ".npy")]
     else:
         raise ValueError(f"IN {str(args.input)!r} does not exist.")
-    refiner = Refiner.load(args.refiner) if args.refiner is not None else Refiner.pretrained(skeleton)
+    snap = {"concept_snap": args.concept_snap} if args.concept_snap else {}
+    refiner = Refiner.load(args.refiner, **snap) if args.refiner is not None else Refiner.pretrained(skeleton, **snap)
     pm = get_plugin_manager() if args.adapter is not None else None
     if pm is not None:
         pm.get_adapter(args.adapter)  # an unknown adapter is a usage error, not a per-file failure

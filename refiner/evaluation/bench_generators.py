@@ -2,10 +2,11 @@
 
 The record (``generators.json``): ``per_action`` (samples per HumanAct12 action), ``n_replications``,
 ``reference_clips`` (real clips of subjects 11-12) and ``rows``: per ``<kind>/generated``,
-``<kind>/refined`` and ``real`` (train clips of subjects 1-10), ``samples``, ``metrics``
+``<kind>/refined``, ``<kind>/snapped`` (refined with the concept-snap option, ``concept_snap=1``) and ``real``
+(train clips of subjects 1-10), ``samples``, ``metrics``
 (:func:`~refiner.evaluation.protocol.evaluate` summary, metric -> ``[mean, 95 % half-width]``) and
 ``physics`` (:func:`physical_record`: mean joint acceleration m/s², foot-skating ratio, bone-length
-variation); refined rows also ``frames_changed`` (share), ``flagged_anchors_per_clip`` and
+variation); refined and snapped rows also ``frames_changed`` (share), ``flagged_anchors_per_clip`` and
 ``refine_seconds_per_clip``.
 """
 from __future__ import annotations
@@ -43,7 +44,7 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
     """The shipped reference generators' samples before and after refinement, scored by the HumanAct12 recogniser.
 
     ``quick``: 3 samples per action and 2 replications (else the paper's Table 1 protocol). Progress
-    event ``"row"``: ``kind``, ``label`` (generated or refined) and ``metrics`` of each generator row.
+    event ``"row"``: ``kind``, ``label`` (generated, refined or snapped) and ``metrics`` of each generator row.
     """
     # these import torch: here, so that importing the suites (``motion-refiner --help``) stays cheap
     from refiner.reference import GENERATOR_KINDS, load_reference_generator
@@ -52,7 +53,8 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
     progress = progress or ignore_progress
     dataset, recognizer = load_humanact12_and_recognizer(data, hidden="random")
     real = dataset.split("test")
-    refiner = Refiner.pretrained("humanact12", split="train")
+    refiners = {"refined": Refiner.pretrained("humanact12", split="train"),
+                "snapped": Refiner.pretrained("humanact12", split="train", concept_snap=1.0)}
     # the paper's Table 1 protocol: 3,000 samples (250 per action), 20 replications
     per_action, n_rep = (3, 2) if quick else (250, 20)
     n_actions = len(dataset.action_names)
@@ -61,17 +63,18 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
         gen = load_reference_generator(kind)
         before = [m for a in range(n_actions)
                   for m in gen.sample_motions(a, per_action, random_state=1000 * a + 7)]
-        t0 = time.perf_counter()
-        joints, reports = refiner.refine(np.stack([m.joints for m in before]), action=[m.action for m in before],
-                                         return_report=True)
-        seconds = time.perf_counter() - t0
-        after = [m.with_joints(j) for m, j in zip(before, joints)]
-        for label, motions in (("generated", before), ("refined", after)):
+        outputs = {"generated": (before, None, None)}
+        for label, refiner in refiners.items():
+            t0 = time.perf_counter()
+            joints, reports = refiner.refine(np.stack([m.joints for m in before]), action=[m.action for m in before],
+                                             return_report=True)
+            outputs[label] = ([m.with_joints(j) for m, j in zip(before, joints)], reports, time.perf_counter() - t0)
+        for label, (motions, reports, seconds) in outputs.items():
             s = evaluate(recognizer, motions, real.motions, n_replications=n_rep, match_labels=True,
                          random_state=0).summary()
             row = rec["rows"][f"{kind}/{label}"] = {"samples": len(motions), "metrics": summary_record(s),
                                                     "physics": physical_record(motions)}
-            if label == "refined":
+            if reports is not None:
                 row.update(frames_changed=float(np.mean([r.changed_frames.mean() for r in reports])),
                            flagged_anchors_per_clip=float(np.mean([len(r.flagged_anchors) for r in reports])),
                            refine_seconds_per_clip=seconds / len(before))

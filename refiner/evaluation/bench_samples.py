@@ -6,7 +6,8 @@ labels by the subject-1-10 weights, and scored: the HumanAct12 recogniser's accu
 20 random GRU hidden states, the Action2Motion protocol), bone-length variation, frames changed,
 and what each clip's report says changed and why.
 
-The record (``samples.json``): :func:`sample_records` of the HumanAct12 samples, with ``ntu13`` (the same
+The record (``samples.json``): :func:`sample_records` of the HumanAct12 samples plus ``snapped`` (the refined
+figures and ``frames_changed`` with the concept-snap option, ``concept_snap=1``), with ``ntu13`` (the same
 for the 18-joint NTU13 samples and the NTU13 recogniser, plus ``clips``) or ``ntu13_skipped`` (why
 not). Without the samples the suite returns ``{"skipped": why}`` and writes nothing.
 """
@@ -69,6 +70,9 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool, *, progress:
         before, labels = before[:5], labels[:5]
     refiner = Refiner.pretrained("humanact12", split="train")
     rec = sample_records(before, labels, recognizer, refiner, n_hidden=5 if quick else 20)
+    snapper = Refiner.pretrained("humanact12", split="train", concept_snap=1.0)
+    snapped = sample_records(before, labels, recognizer, snapper, n_hidden=5 if quick else 20)
+    rec["snapped"] = {**snapped["refined"], "frames_changed": snapped["frames_changed"]}
     ntu = _ntu13_records(data, folder, quick)
     if isinstance(ntu, str):
         rec["ntu13_skipped"] = ntu

@@ -29,6 +29,7 @@ from scipy.ndimage import gaussian_filter1d
 from refiner.core.skeletons import get_skeleton, rigid_skeleton
 from refiner.refinement.amplitude import restored_amplitude
 from refiner.refinement.anchor_recognition import anchor_peaks
+from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
 from refiner.refinement.noise_filter import filtered_noise
@@ -45,9 +46,8 @@ __all__ = ["flag_runs", "noise_ratio", "NOISE_RATIO", "refine_clips", "refine_ba
 #: ``"given"``: the network sees the flagged frames; ``"infill"``: they are hidden and in-filled from the context.
 REPAIRS = ("typed", "select", "given", "infill")
 _GROUP_NAMES = tuple(GROUPS)
-#: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many
-#: frames its window is widened on each side; ``"a+b"`` applies ``a``, then ``b`` to its result (a
-#: network proposal, which is computed for the whole batch beforehand, can only come first).
+#: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many frames its window
+#: is widened on each side; ``"a+b"`` applies ``a``, then ``b`` to its result (a network proposal can only come first).
 #: Chosen by measurement (``examples/measure_typed_repairs.py``, which takes each variant below as
 #: JSON) on the calibration subjects 9-10 of the train split (every 2nd clip, the
 #: benchmark's five training families at severity 2 and clean clips; the two held-out families were
@@ -397,4 +397,4 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                 else:
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
-    return filtered_noise(refiner, out, reports)  # last: a clip still noisy throughout is a texture, not a run
+    return filtered_noise(refiner, snapped_to_concepts(refiner, out, reports), reports)  # noise throughout: last
