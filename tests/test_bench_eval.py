@@ -76,6 +76,8 @@ def test_bench_flaws_quick(tmp_path):
         assert 0.0 <= clean["share_changed"] <= 1.0
     assert rec["clean"]["identity"] == {"mpjpe_change_cm": 0.0, "share_changed": 0.0}
     assert rec["clean"]["savgol"]["mpjpe_change_cm"] > 0 and rec["clean"]["savgol"]["share_changed"] == 1.0
+    snap = rec["clean"]["ours_concept_snap"]  # the option moves every anchor of clean clips too (documented)
+    assert snap["share_changed"] == 1.0 and snap["mpjpe_change_cm"] > 1.0
     for family in FLAW_FAMILIES:
         assert by[(family, "identity")]["removed_pct"] == 0.0 and by[(family, "identity")]["mpjpe_cm"] > 0.2
     summary = rec["summary"]["2"]

@@ -166,5 +166,7 @@ def test_concept_snap_option(clip, tmp_path, capsys):
     report = json.loads((tmp_path / "snapped.report.json").read_text())
     assert "concept_snap" in [c["step"] for c in report["clips"][0]["changes"]]
     assert np.abs(np.load(out) - clip).max() > 0.01  # the real walk that needs nothing is snapped all the same
-    assert main(["refine", str(src), "-o", str(out), "--concept-snap", "2", "--force"]) == 2
+    assert main(["refine", str(src), "-o", str(out), "--action", "walk", "--concept-snap", "2", "--force"]) == 2
     assert "concept_snap" in capsys.readouterr().err
+    assert main(["refine", str(src), "-o", str(out), "--concept-snap", "1", "--force"]) == 2  # no action to snap to
+    assert "needs `--action`" in capsys.readouterr().err

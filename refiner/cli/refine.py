@@ -80,6 +80,8 @@ def refine_run(args: argparse.Namespace) -> int:
         targets = [args.out if args.out.suffix.lower() == ".npy" else args.out / (args.input.stem + ".npy")]
     else:
         raise ValueError(f"IN {str(args.input)!r} does not exist.")
+    if args.concept_snap and args.action is None:  # an inferred action is never snapped to: it would do nothing
+        raise ValueError("`--concept-snap` needs `--action`: the anchors are snapped onto that action's concepts.")
     snap = {"concept_snap": args.concept_snap} if args.concept_snap else {}
     refiner = Refiner.load(args.refiner, **snap) if args.refiner is not None else Refiner.pretrained(skeleton, **snap)
     pm = get_plugin_manager() if args.adapter is not None else None

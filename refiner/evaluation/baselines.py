@@ -174,7 +174,8 @@ class PipelineRefiner:
 #: factories load the weights trained on subjects 1-10 only (``split="train"``), since the benchmark
 #: runs on subjects 11-12; they raise (ValueError without those weights) and the bench then skips
 #: them with a note. ``ours_full`` is the default (learned) refiner; ``ours_infill`` its in-filling
-#: variant; ``ours_concepts`` the anchor-score / transition-residual pipeline with the paper's parts.
+#: variant; ``ours_concepts`` the anchor-score / transition-residual pipeline with the paper's parts;
+#: ``ours_concept_snap`` the default with the concept-snap option (every anchor moved onto a concept).
 FLAW_REFINERS: dict[str, Callable[[], object]] = {
     "identity": IdentityRefiner,
     "savgol": SavgolRefiner,
@@ -185,6 +186,7 @@ FLAW_REFINERS: dict[str, Callable[[], object]] = {
     "ours_transition": lambda: PipelineRefiner("transition", split="train"),
     "ours_infill": lambda: PipelineRefiner("full", split="train", repair="infill"),
     "ours_concepts": lambda: PipelineRefiner("full", split="train", method="concepts"),
+    "ours_concept_snap": lambda: PipelineRefiner("full", split="train", concept_snap=1.0),
 }
 
 

@@ -22,32 +22,63 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from refiner.concepts.anchors import AnchorConcepts, root_relative
-from refiner.concepts.segmentation import DEFAULT_PENALTY, MIN_DURATION, segment
+from refiner.concepts.segmentation import DEFAULT_PENALTY, segment
+from refiner.core.rotations import rotvec_to_rotmat
+from refiner.core.skeletons import get_skeleton
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 
-__all__ = ["snap_to_concepts", "snapped_to_concepts", "check_strength"]
+__all__ = ["snap_to_concepts", "snapped_to_concepts", "check_strength", "facing", "turned"]
 
 
 def check_strength(strength) -> float:
-    """``strength`` as a float in [0, 1]; ValueError otherwise."""
-    try:
-        value = float(strength)
-    except (TypeError, ValueError):
-        raise ValueError(f"`concept_snap` must be a number in [0, 1]; got {strength!r}.") from None
+    """``strength`` as a float in [0, 1]; ValueError otherwise (bools and strings too)."""
+    if isinstance(strength, (bool, np.bool_)) or not isinstance(strength, (int, float, np.integer, np.floating)):
+        raise ValueError(f"`concept_snap` must be a number in [0, 1]; got {strength!r}.")
+    value = float(strength)
     if not 0.0 <= value <= 1.0:
         raise ValueError(f"`concept_snap` must be in [0, 1] (the share of the way onto the concept); got {strength!r}.")
     return value
 
 
-def snap_to_concepts(joints: np.ndarray, action: int, concepts: AnchorConcepts, *, strength: float = 1.0,
-                     penalty: float = DEFAULT_PENALTY) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Move a clip's anchors onto the nearest anchor concepts of ``action``.
+def facing(poses: np.ndarray, skeleton: str) -> np.ndarray:
+    """Heading of poses ``(N, J, 3)`` about the skeleton's up axis, ``(N,)`` radians: the angle of the hip
+    line (right hip -> left hip) in the horizontal plane, 0 along the skeleton's forward axis."""
+    skel = get_skeleton(skeleton)
+    up, ahead = skel.up_vector, skel.forward_vector
+    side = np.cross(up, ahead)
+    hips = poses[:, skel.index("left_hip")] - poses[:, skel.index("right_hip")]
+    return np.arctan2(hips @ side, hips @ ahead)
+
+
+def turned(poses: np.ndarray, angle: np.ndarray, skeleton: str) -> np.ndarray:
+    """Poses ``(N, J, 3)`` rotated by ``angle (N,)`` radians about the skeleton's up axis (through the origin)."""
+    rot = rotvec_to_rotmat(get_skeleton(skeleton).up_vector[None] * np.asarray(angle, np.float64)[:, None])
+    return np.einsum("nij,nkj->nki", rot, poses)
+
+
+def _mean_angle(angles: np.ndarray) -> float:
+    """Circular mean of angles (radians)."""
+    return float(np.angle(np.exp(1j * np.asarray(angles)).mean()))
+
+
+def snap_to_concepts(joints: np.ndarray, action: int, concepts: AnchorConcepts, *, skeleton: str = "humanact12",
+                     strength: float = 1.0, penalty: float = DEFAULT_PENALTY) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Move a clip's anchors onto the nearest anchor concepts of ``action``, turned to face as the clip does.
+
+    The concepts hold HumanAct12's headings (its clips start facing within about 25 degrees of one
+    direction); a clip may face anywhere, so the concepts are first turned about the up axis by the
+    difference of the clip's mean heading (over its anchors' hip lines) and theirs: a clip turned as a
+    whole is snapped as it would be unturned. Each anchor then takes its concept's heading relative to
+    that mean, so a clip that turns far within itself is twisted toward its mean heading. (Turning each
+    concept to each anchor's own heading instead made the snap weaker: 600 samples, ``a2m`` FID 3.301
+    against 3.155, ``mdm`` 0.911 against the clip-level turn's, the real A2M samples 75.3 against 86.8 %.)
 
     Parameters
     ----------
     joints : ndarray of shape (T, J, 3), metres, T > the segmentation's minimum transition
     action : int, an action of ``concepts``
-    concepts : fitted AnchorConcepts with J joints
+    concepts : fitted AnchorConcepts with J joints of ``skeleton``
+    skeleton : str, default "humanact12"
     strength : float in [0, 1], default 1
         Share of the way from each anchor's pose to its concept (1: onto it).
 
@@ -58,36 +89,40 @@ def snap_to_concepts(joints: np.ndarray, action: int, concepts: AnchorConcepts, 
     anchors : ndarray (K,) int
         The anchor frames.
     distance : ndarray (K,) float64
-        Each anchor's MPJPE (metres) to its concept before the move.
+        Each anchor's MPJPE (metres) to its (turned) concept before the move.
     """
     x = np.asarray(joints, dtype=np.float32)
     anchors = segment(x, penalty=penalty).anchors
-    acts = np.full(len(anchors), int(action))
-    index, distance = concepts.predict(x[anchors], acts), concepts.distance(x[anchors], acts)
-    target = np.stack([concepts.concept(int(action), int(i)) for i in index])
-    move = (check_strength(strength) * (target - root_relative(x[anchors]))).reshape(len(anchors), -1)
+    poses = root_relative(x[anchors]).astype(np.float64)
+    centres = np.stack([concepts.concept(int(action), i) for i in range(concepts.n_concepts_[int(action)])])
+    turn = _mean_angle(facing(poses, skeleton)) - _mean_angle(facing(centres, skeleton))
+    centres = turned(centres.astype(np.float64), np.full(len(centres), turn), skeleton)  # (C, J, 3) as the clip faces
+    gap = np.linalg.norm(poses[:, None] - centres[None], axis=-1).mean(-1)  # (K, C) MPJPE
+    index = gap.argmin(1)
+    target = centres[index]
+    move = (check_strength(strength) * (target - poses)).reshape(len(anchors), -1)
     # a natural cubic spline through the anchors' moves: no kink at an anchor (linear carrying of the moves
     # gives the same FID on the reference generators, 0.871 vs 0.859 on mdm, with a velocity jump there)
     frames = np.arange(len(x))
     carried = CubicSpline(anchors, move, axis=0, bc_type="natural")(frames) if len(anchors) > 2 else \
         np.stack([np.interp(frames, anchors, m) for m in move.T], axis=1)
-    return (x + carried.reshape(x.shape)).astype(np.float32), anchors, distance
+    return (x + carried.reshape(x.shape)).astype(np.float32), anchors, gap.min(1)
 
 
-def snapped_to_concepts(refiner, clips: np.ndarray, reports: list) -> np.ndarray:
+def snapped_to_concepts(refiner, clips: np.ndarray, reports: list, mode: str = "full") -> np.ndarray:
     """The refiner's concept-snap step: ``clips (B, T, J, 3)`` whose action was *given* snapped with
-    ``refiner.concept_snap`` and put back on their bone lengths, each change in its clip's report; returned
-    as given when the option is 0 or a clip is too short to segment. An inferred action is not snapped to:
-    it would pull the clip toward the refiner's own guess."""
+    ``refiner.concept_snap`` and put back on their (median) bone lengths, each change in its clip's report;
+    returned as given when the option is 0 or ``mode`` is "transition" (this is an anchor refinement). An
+    inferred action is not snapped to: it would pull the clip toward the refiner's own guess."""
     strength = float(getattr(refiner, "concept_snap", 0.0))
-    if strength == 0.0 or clips.shape[1] <= 2 * MIN_DURATION:
+    if strength == 0.0 or mode == "transition":
         return clips
     out, every = clips.copy(), np.ones(clips.shape[1], bool)
     for b, report in enumerate(reports):
         if report.action is None or report.action_inferred:
             continue
         snapped, anchors, distance = snap_to_concepts(clips[b], report.action, refiner.anchor_concepts,
-                                                      strength=strength)
+                                                      skeleton=refiner.skeleton, strength=strength)
         out[b] = project_bone_lengths(snapped, reference_lengths(clips[b], refiner.skeleton), every, refiner.skeleton)
         moved = 100 * float(np.linalg.norm(out[b] - clips[b], axis=-1).mean())
         report.changes.append({"start": 0, "stop": clips.shape[1], "step": "concept_snap", "repair": "concept_snap",

@@ -397,4 +397,4 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                 else:
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
-    return filtered_noise(refiner, snapped_to_concepts(refiner, out, reports), reports)  # noise throughout: last
+    return filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports)  # noise: last

@@ -118,7 +118,7 @@ class Refiner:
     concept_snap : float in [0, 1], default=0
         The concept-snap option (:mod:`refiner.refinement.concept_snap`): a clip of a given action has its
         anchors moved this share of the way onto the action's nearest anchor concepts. It trades fidelity
-        for realism (``mdm`` FID 1.315 -> 0.859, but every anchor of a real clip moves), hence off by default.
+        for realism (``bench generators``: ``mdm`` FID 1.309 -> 0.836; but every anchor of a real clip moves): off.
     rigid_lengths : {"proportions", "median"}, optional
         The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions
         the weights learned (``manifest["learned"]["bone_proportions"]``; a drifting bone's median is as
@@ -167,9 +167,8 @@ class Refiner:
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
         self.concept_snap = check_strength(concept_snap)
         if self.concept_snap and (self.method != "learned" or anchor_concepts is None):
-            raise ValueError("concept_snap is an option of method='learned' and needs `anchor_concepts`; "
-                             f"this refiner has method={self.method!r}, anchor_concepts "
-                             f"{'given' if anchor_concepts is not None else 'missing'}.")
+            raise ValueError(f"concept_snap needs method='learned' and `anchor_concepts`; this refiner has method="
+                             f"{self.method!r}, anchor_concepts {'missing' if anchor_concepts is None else 'given'}.")
         if self.method == "learned" and not learned:
             raise ValueError("method='learned' needs a `flaw_recognizer` and a `flaw_repairer`.")
         paper = {"recognizer": recognizer, "anchor_refiner": anchor_refiner, "transition_generator": transition_generator,
@@ -274,6 +273,8 @@ class Refiner:
         that :func:`refiner.core.skeletons.convert` connects with HumanAct12's (``uestc``, ``humanml3d``)
         gets a :class:`~refiner.refinement.converted_refinement.ConvertedRefiner` running the HumanAct12 weights.
         """
+        snap = check_strength(kwargs.pop("concept_snap", 0.0))  # one cached refiner per strength, however written
+        kwargs.update({"concept_snap": snap} if snap else {})
         with thread_limits(1):  # copying the tensors on one thread: 0.07 s; on two, under load, 0.4-0.6 s
             return copy.deepcopy(_shared_pretrained(cls, skeleton, split, device, kwargs))
 
