@@ -44,7 +44,7 @@ def flaw_features(joints, skeleton="humanact12") -> np.ndarray:
     """Per-frame features of joints ``(T, J, 3)`` or a batch ``(B, T, J, 3)``, metres (T >= 4) ->
     ``(T, N_FEATURES)`` or ``(B, T, N_FEATURES)`` float32."""
     skel = get_skeleton(skeleton)
-    x = np.asarray(joints, dtype=np.float64)
+    x = np.asarray(joints, dtype=np.float32)  # float64 took half as long again (256 clips: 163 against 106 ms)
     single = x.ndim == 3
     x = x[None] if single else x
     if x.ndim != 4 or x.shape[1] < 4 or x.shape[-1] != 3:

@@ -72,22 +72,38 @@ def thread_limits(threads: int | None):
 
 def check_metres_each(clips: np.ndarray, skel, batched: bool) -> None:
     """:func:`check_metres` per clip of ``clips (B, T, J, 3)`` (one clip in centimetres must not hide in a
-    batch's median), naming the clip when the input was a batch."""
-    for i, clip in enumerate(clips):
+    batch's median), naming the clip when the input was a batch. Judged for the whole batch at once (a
+    loop over 256 clips took a tenth of refining them); the first clip refused is checked again alone for
+    its message."""
+    extent, median = _metres_evidence(clips, skel)
+    for i in np.flatnonzero((extent > _MAX_EXTENT) | (median > _MAX_MEDIAN_BONE))[:1]:
         try:
-            check_metres(clip, skel)
+            check_metres(clips[i], skel)
         except ValueError as e:
             if not batched:
                 raise
             raise ValueError(f"clip {i} of {len(clips)}: {e}") from e
 
 
+#: Coordinates and median bone length (in the joints' units) beyond which joints cannot be metres.
+_MAX_EXTENT, _MAX_MEDIAN_BONE = 1e3, 1.5
+#: Frames whose bones judge the unit: 16 spread over the clip (a unit is the same on every frame).
+_UNIT_FRAMES = 16
+
+
+def _metres_evidence(clips: np.ndarray, skel) -> tuple[np.ndarray, np.ndarray]:
+    """Per clip of ``(B, T, J, 3)``: the largest |coordinate| and the median bone length over
+    :data:`_UNIT_FRAMES` frames, each ``(B,)``."""
+    step = max(1, clips.shape[1] // _UNIT_FRAMES)
+    extent = np.abs(clips).reshape(len(clips), -1).max(1)
+    return extent, np.median(skel.bone_lengths(clips[:, ::step]).reshape(len(clips), -1), axis=1)
+
+
 def check_metres(x: np.ndarray, skel) -> None:
-    """Refuse joints that cannot be metres: huge values, or bones metres long (centimetres given)."""
-    extent = float(np.abs(x).max())
-    if extent > 1e3:
+    """Refuse joints ``(T, J, 3)`` that cannot be metres: huge values, or bones metres long (centimetres given)."""
+    extent, median = (float(v[0]) for v in _metres_evidence(np.asarray(x)[None], skel))
+    if extent > _MAX_EXTENT:
         raise ValueError(f"`seq` has coordinates up to {extent:.3g}; joints must be in metres (|x| < 1000).")
-    median = float(np.median(skel.bone_lengths(x)))
-    if median > 1.5:
+    if median > _MAX_MEDIAN_BONE:
         raise ValueError(f"`seq` has bones of {median:.3g} units median length; joints must be in metres "
                          "(centimetres: divide by 100).")
