@@ -43,12 +43,17 @@ def check_strength(strength) -> float:
 
 def facing(poses: np.ndarray, skeleton: str) -> np.ndarray:
     """Heading of poses ``(N, J, 3)`` about the skeleton's up axis, ``(N,)`` radians: the angle of the hip
-    line (right hip -> left hip) in the horizontal plane, 0 along the skeleton's forward axis."""
+    line (right hip -> left hip) in the horizontal plane, measured from the skeleton's forward axis (a body
+    facing forward reads +-90 degrees; only differences of headings are used)."""
+    return np.angle(_hip_lines(poses, skeleton))
+
+
+def _hip_lines(poses: np.ndarray, skeleton: str) -> np.ndarray:
+    """Each pose's hip line in the horizontal plane as a complex number ``(N,)`` (forward axis real)."""
     skel = get_skeleton(skeleton)
     up, ahead = skel.up_vector, skel.forward_vector
-    side = np.cross(up, ahead)
     hips = poses[:, skel.index("left_hip")] - poses[:, skel.index("right_hip")]
-    return np.arctan2(hips @ side, hips @ ahead)
+    return hips @ ahead + 1j * (hips @ np.cross(up, ahead))
 
 
 def turned(poses: np.ndarray, angle: np.ndarray, skeleton: str) -> np.ndarray:
@@ -57,9 +62,10 @@ def turned(poses: np.ndarray, angle: np.ndarray, skeleton: str) -> np.ndarray:
     return np.einsum("nij,nkj->nki", rot, poses)
 
 
-def _mean_angle(angles: np.ndarray) -> float:
-    """Circular mean of angles (radians)."""
-    return float(np.angle(np.exp(1j * np.asarray(angles)).mean()))
+def _mean_heading(poses: np.ndarray, skeleton: str) -> float:
+    """Heading (radians) of the summed hip lines of poses ``(N, J, 3)``: a pose whose hip line is short in
+    the horizontal plane (lying on its side) weighs little."""
+    return float(np.angle(_hip_lines(poses, skeleton).sum()))
 
 
 def snap_to_concepts(joints: np.ndarray, action: int, concepts: AnchorConcepts, *, skeleton: str = "humanact12",
@@ -96,7 +102,7 @@ def snap_to_concepts(joints: np.ndarray, action: int, concepts: AnchorConcepts, 
     anchors = segment(x, penalty=penalty).anchors
     poses = root_relative(x[anchors]).astype(np.float64)
     centres = np.stack([concepts.concept(int(action), i) for i in range(concepts.n_concepts_[int(action)])])
-    turn = _mean_angle(facing(poses, skeleton)) - _mean_angle(facing(centres, skeleton))
+    turn = _mean_heading(poses, skeleton) - _mean_heading(centres.astype(np.float64), skeleton)
     centres = turned(centres.astype(np.float64), np.full(len(centres), turn), skeleton)  # (C, J, 3) as the clip faces
     gap = np.linalg.norm(poses[:, None] - centres[None], axis=-1).mean(-1)  # (K, C) MPJPE
     index = gap.argmin(1)
