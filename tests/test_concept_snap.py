@@ -104,6 +104,7 @@ def test_a_converted_skeleton_snaps_with_a_humanact12_action_name(humanact12):
     clip = humanact12[int(np.flatnonzero(humanact12.subjects == 12)[5])]
     x = convert(clip.joints[:60], "humanact12", "uestc")
     refiner = Refiner.pretrained("uestc", concept_snap=1.0)
+    assert refiner.concept_snap == 1.0 and Refiner.pretrained("uestc").concept_snap == 0.0
     _, named = refiner.refine(x, action=humanact12.action_names[clip.action], return_report=True)
     _, indexed = refiner.refine(x, action=int(clip.action), return_report=True)  # an index: UESTC's own label
     assert "concept_snap" in [c["step"] for c in named.changes]

@@ -84,6 +84,11 @@ class ConvertedRefiner:
         """``base``'s thread setting, which :meth:`refine` runs under (see :class:`~refiner.refinement.pipeline.Refiner`)."""
         return self.base.threads
 
+    @property
+    def concept_snap(self) -> float:
+        """``base``'s concept-snap strength (applied with a HumanAct12 action name only, see :meth:`refine`)."""
+        return self.base.concept_snap
+
     def threads_for(self, seq) -> int | None:
         """The torch / BLAS threads :meth:`refine` uses for ``seq``."""
         return self.base.threads_for(seq)
