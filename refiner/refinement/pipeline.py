@@ -118,7 +118,7 @@ class Refiner:
     concept_snap : float in [0, 1], default=0
         The concept-snap option (:mod:`refiner.refinement.concept_snap`): a clip of a given action has its
         anchors moved this share of the way onto the action's nearest anchor concepts. It trades fidelity
-        for realism (``bench generators``: ``mdm`` FID 1.309 -> 0.836; but every anchor of a real clip moves): off.
+        for realism (``bench generators``: ``mdm`` FID 1.309 -> 0.780; but every anchor of a real clip moves): off.
     rigid_lengths : {"proportions", "median"}, optional
         The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions
         the weights learned (``manifest["learned"]["bone_proportions"]``; a drifting bone's median is as
