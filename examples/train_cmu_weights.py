@@ -1,17 +1,19 @@
-"""Train the shipped ``cmu_mocap-train`` weights: the learned refinement steps on the CMU subset only.
+"""Train the shipped CMU weights: the learned refinement steps on the CMU subset only.
 
 Usage (each stage resumes from its checkpoints in ``OUT/parts``; run the three part stages in
-parallel processes, then ``assemble``)::
+parallel processes, then ``assemble``; ``SPLIT`` is ``train``, the default, for ``cmu_mocap-train``, or
+``all`` for ``cmu_mocap``)::
 
-    python examples/train_cmu_weights.py OUT flaw_classifier
-    python examples/train_cmu_weights.py OUT flaw_recognizer
-    python examples/train_cmu_weights.py OUT flaw_repairer
-    python examples/train_cmu_weights.py OUT noise_filter                  # closed form, about a minute
-    python examples/train_cmu_weights.py OUT amplitude_restorer            # medians, seconds
-    python examples/train_cmu_weights.py OUT assemble [FOLDER]     # default FOLDER: OUT/refiner
+    python examples/train_cmu_weights.py OUT flaw_classifier [SPLIT]
+    python examples/train_cmu_weights.py OUT flaw_recognizer [SPLIT]
+    python examples/train_cmu_weights.py OUT flaw_repairer [SPLIT]
+    python examples/train_cmu_weights.py OUT noise_filter [SPLIT]          # closed form, about a minute
+    python examples/train_cmu_weights.py OUT amplitude_restorer [SPLIT]    # medians, seconds
+    python examples/train_cmu_weights.py OUT assemble [SPLIT] [FOLDER]     # default FOLDER: OUT/refiner
 
-Training clips: the CMU subset's training subjects (every subject but
-``refiner.io.datasets.CMU_TEST_SUBJECTS``), clips of at least 16 frames (790 of 815). The networks
+Training clips: split ``train``, the CMU subset's training subjects (every subject but
+``refiner.io.datasets.CMU_TEST_SUBJECTS``); split ``all``, every subject; clips of at least 16 frames
+(790 of 815 training clips). The networks
 are HumanAct12's "default" learned configuration, except that the flaw recogniser trains 10 epochs
 (not 40): the refiner detects with the flaw classifier, and the recogniser gives actions and anchors.
 The paper's parts (anchor and transition refiners) are not trained, so these weights serve
@@ -24,6 +26,8 @@ import numpy as np
 import torch
 from threadpoolctl import threadpool_limits
 
+from refiner.concepts.anchors import AnchorConcepts
+from refiner.concepts.segmentation import segment
 from refiner.io.datasets import CMU_ACTIONS, load_cmu_mocap
 from refiner.refinement import train_learned as tl
 from refiner.refinement.pipeline import Refiner
@@ -36,29 +40,49 @@ RECOGNIZER_EPOCHS = 10
 torch.set_num_threads(1)
 threadpool_limits(1)
 out, stage = Path(sys.argv[1]), sys.argv[2]
-train = load_cmu_mocap().split("train")
+split = sys.argv[3] if len(sys.argv) > 3 else "train"
+if split not in ("train", "all"):
+    raise SystemExit(f"unknown split {split!r}; known: train, all")
+train = load_cmu_mocap().split(split)
 train = train.subset(np.flatnonzero([len(m.joints) >= MIN_FRAMES for m in train]))
 if stage in tl.LEARNED_PARTS:
     if stage == "flaw_recognizer":
         tl.LEARNED_CONFIGS["cmu"]["schedule"] = dict(tl.LEARNED_CONFIGS["default"]["schedule"], n_epochs=RECOGNIZER_EPOCHS)
-    tl.train_learned(train, out, split="all", only=stage, config="cmu", device="cpu")
+    config = "cmu" if stage in ("flaw_recognizer", "flaw_repairer") else "default"  # the others have their own tables
+    tl.train_learned(train, out, split="all", only=stage, config=config, device="cpu")
 elif stage == "assemble":
     parts = tl.train_learned(train, out, split="all")  # loads the finished parts
     thresholds = tl.calibrate_learned(parts, train, split="all")
     info = {name: {k: v for k, v in __import__("json").loads((out / "parts" / f"{name}.json").read_text()).items()
                    if k != "history"} for name in tl.LEARNED_PARTS}
-    manifest = {"dataset": "cmu_mocap", "split": "train", "config": "default (flaw recogniser: 10 epochs)",
+    calibration = sorted(set(int(s) for s in train.subjects[tl.calibration_split(train.subjects)]))
+    held_out = ("held-out subjects: refiner.io.datasets.CMU_TEST_SUBJECTS" if split == "train" else
+                "every subject; no held-out subjects (the benchmarks use the cmu_mocap-train weights)")
+    manifest = {"dataset": "cmu_mocap", "split": split, "config": "default (flaw recogniser: 10 epochs)",
                 "clips": len(train), "subjects": sorted(set(int(s) for s in train.subjects)), "licence": CMU_LICENCE,
-                "command": "python examples/train_cmu_weights.py OUT {flaw_classifier,flaw_recognizer,flaw_repairer,noise_filter,amplitude_restorer,assemble}",
+                "command": f"python examples/train_cmu_weights.py OUT {{flaw_classifier,flaw_recognizer,flaw_repairer,"
+                           f"noise_filter,amplitude_restorer,assemble}} {split}",
                 "notes": ["learned steps only: method='concepts' (the paper's parts) is not available for these weights",
-                          f"training clips of at least {MIN_FRAMES} frames", "held-out subjects: "
-                          "refiner.io.datasets.CMU_TEST_SUBJECTS"],
-                "learned": {**info, **thresholds}}
-    model = Refiner(None, None, None, None, None, None, parts["flaw_recognizer"], parts["flaw_repairer"],
+                          f"training clips of at least {MIN_FRAMES} frames", held_out,
+                          f"networks on every subject but {calibration}, thresholds on those",
+                          "anchor_concepts: the repair network's (K-means, 8 per action), for the concept-snap option"],
+                "learned": {**info, **thresholds, **tl.bone_proportion_records(train)}}
+    concepts_file = out / "parts" / "anchor_concepts.safetensors"
+    if concepts_file.is_file():
+        concepts = AnchorConcepts.load(concepts_file)
+    else:  # repair networks trained before train_learned kept them: fitted again as it fits them (K-means is seeded)
+        fit = np.flatnonzero(~tl.calibration_split(train.subjects))
+        concepts = tl.fit_anchor_concepts([train.motions[i].joints for i in fit], train.actions[fit],
+                                          [segment(train.motions[i].joints).anchors for i in fit],
+                                          n_actions=len(CMU_ACTIONS))
+    tokens = parts["flaw_repairer"].concepts_
+    if any(not np.allclose(c, tokens[a, : len(c)], atol=1e-5) for a, c in enumerate(concepts.centers_)):
+        raise SystemExit("the anchor concepts differ from the repair network's; delete parts/anchor_concepts.safetensors")
+    model = Refiner(None, None, None, None, concepts, None, parts["flaw_recognizer"], parts["flaw_repairer"],
                     parts["flaw_classifier"], noise_filter=parts["noise_filter"],
                     amplitude_restorer=parts["amplitude_restorer"], skeleton="cmu_mocap",
                     action_names=CMU_ACTIONS, manifest=manifest)
-    folder = Path(sys.argv[3]) if len(sys.argv) > 3 else out / "refiner"
+    folder = Path(sys.argv[4]) if len(sys.argv) > 4 else out / "refiner"
     model.save(folder, half=True)
     print(Refiner.load(folder).manifest["learned"])
 else:

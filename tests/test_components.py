@@ -241,3 +241,84 @@ def test_shipped_anchor_quality_keeps_its_scores_in_half_the_bytes(humanact12, t
     actions = np.array([humanact12[i].action for i in range(0, 1000, 100)])
     np.testing.assert_array_equal(old.score(poses, actions), model.score(poses, actions))
     assert (tmp_path / "full.safetensors").stat().st_size > 1.8 * path.stat().st_size
+
+
+def test_int8_rows_quantize_within_half_a_step(rng):
+    from refiner.core.serialization import dequantize_rows, quantize_rows
+
+    a = rng.normal(size=(6, 4, 5)).astype(np.float32) * np.arange(1, 7)[:, None, None]
+    a[2] = 0.0  # a dead unit keeps its zeros
+    codes, scales = quantize_rows(a)
+    assert codes.dtype == np.int8 and codes.shape == a.shape and scales.shape == (6,)
+    back = dequantize_rows(codes, scales)
+    step = np.abs(a).reshape(6, -1).max(1) / 127
+    assert (np.abs(back - a).reshape(6, -1).max(1) <= step / 2 + 1e-7).all()
+    np.testing.assert_array_equal(back[2], 0.0)
+    with pytest.raises(ValueError, match="at least 2"):
+        quantize_rows(np.ones(3))
+    with pytest.raises(ValueError, match="finite"):
+        quantize_rows(np.array([[1.0, np.nan]]))
+    with pytest.raises(ValueError, match="one scale per row"):
+        dequantize_rows(codes, scales[:3])
+
+
+def test_int8_save_stores_large_matrices_as_codes_and_loads_close(synthetic, tmp_path):
+    from refiner.core.serialization import load_state
+    from refiner.nn.components import INT8_MIN_SIZE
+
+    gen = _fitted("transition_generator", synthetic)
+    gen.save(tmp_path / "f16.safetensors", half=True)
+    gen.save(tmp_path / "i8.safetensors", int8=True)
+    tensors, _ = load_state(tmp_path / "i8.safetensors")
+    state = gen.network_.state_dict()
+    big = [k for k, v in state.items() if v.ndim >= 2 and v.numel() >= INT8_MIN_SIZE]
+    assert big and all(tensors[f"network.{k}.int8"].dtype == np.int8 for k in big)
+    assert all(tensors[f"network.{k}"].dtype == np.float16 for k in state if k not in big)  # the rest as half
+    back = TransitionGenerator.load(tmp_path / "i8.safetensors")
+    for k, v in back.network_.state_dict().items():
+        assert v.dtype == state[k].dtype
+        ref, got = state[k].float().numpy(), v.float().numpy()
+        if k in big:  # within half a step of the row's own scale: a scale shared by the tensor would fail here
+            rows, refs = got.reshape(len(got), -1), ref.reshape(len(ref), -1)
+            assert (np.abs(rows - refs).max(1) <= np.abs(refs).max(1) / 254 + 1e-7).all(), k
+        else:
+            np.testing.assert_allclose(got, ref, rtol=1e-3, atol=1e-4)
+    assert (tmp_path / "i8.safetensors").stat().st_size < 0.75 * (tmp_path / "f16.safetensors").stat().st_size
+    broken = {k: v for k, v in tensors.items() if not k.endswith(".int8_scale")}
+    from refiner.core.serialization import save_state
+    save_state(tmp_path / "broken.safetensors", broken, load_state(tmp_path / "i8.safetensors")[1])
+    with pytest.raises(ValueError, match="without their scales"):
+        TransitionGenerator.load(tmp_path / "broken.safetensors")
+
+
+def test_int8_leaves_buffers_exact_and_refiner_save_checks_its_part_names(rng, tmp_path):
+    import torch
+    from torch import nn
+
+    from refiner.nn.components import NetworkComponent
+
+    class Tiny(NetworkComponent):
+        def __init__(self, width: int = 64):
+            self.width = width
+
+        def fit(self):
+            self.network_ = self._make_network({})
+            return self
+
+        def _make_network(self, fitted):
+            net = nn.Linear(self.width, self.width)
+            net.register_buffer("table", torch.zeros(self.width, self.width))
+            return net
+
+    model = Tiny().fit()
+    model.network_.table.copy_(torch.from_numpy(rng.normal(size=(64, 64)).astype(np.float32)))
+    model.save(tmp_path / "t.safetensors", int8=True)
+    back = Tiny.load(tmp_path / "t.safetensors")
+    np.testing.assert_array_equal(back.network_.table.numpy(), model.network_.table.half().float().numpy())
+    assert not np.array_equal(back.network_.weight.detach().numpy(), model.network_.weight.detach().half().float().numpy())
+    from refiner.refinement.pipeline import Refiner
+
+    refiner = Refiner.pretrained("humanact12", split="train")
+    for bad in ("transition", ["recognizer", "anchor_concepts"], True):
+        with pytest.raises(ValueError, match="`int8` must name"):
+            refiner.save(tmp_path / "r", int8=bad)

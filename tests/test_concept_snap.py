@@ -89,8 +89,10 @@ def test_the_option_snaps_clips_of_given_actions_only_and_keeps_bones_rigid(huma
 
 
 def test_the_option_is_refused_where_it_cannot_run():
-    with pytest.raises(ValueError, match="concept_snap"):
-        Refiner.pretrained("cmu_mocap", concept_snap=1.0)  # the CMU weights hold the learned steps only
+    cmu = Refiner.pretrained("cmu_mocap", split="train")
+    with pytest.raises(ValueError, match="concept_snap"):  # weights without anchor concepts
+        Refiner(None, None, None, None, None, None, cmu.flaw_recognizer, cmu.flaw_repairer, cmu.flaw_classifier,
+                skeleton="cmu_mocap", action_names=cmu.action_names, concept_snap=1.0)
     with pytest.raises(ValueError, match="concept_snap"):
         Refiner.pretrained("humanact12", split="train", method="concepts", concept_snap=0.5)
     with pytest.raises(ValueError, match="concept_snap"):
@@ -110,3 +112,26 @@ def test_a_converted_skeleton_snaps_with_a_humanact12_action_name(humanact12):
     assert "concept_snap" in [c["step"] for c in named.changes]
     assert np.linalg.norm(refiner.refine(x, action=humanact12.action_names[clip.action]) - x, axis=-1).mean() > 0.01
     assert "concept_snap" not in [c["step"] for c in indexed.changes]
+
+
+@pytest.mark.real_data
+def test_the_cmu_weights_snap_onto_their_own_concepts():
+    """The CMU weights ship their repair network's anchor concepts (K-means on CMU clips), so the option
+    serves the permissively licensed skeleton too; the concepts are the network's, value for value."""
+    from conftest import shared_data_dir
+
+    from refiner.io.datasets import load_cmu_mocap
+
+    refiner = Refiner.pretrained("cmu_mocap", split="train", concept_snap=1.0)
+    tokens = refiner.flaw_repairer.concepts_
+    for a, centres in enumerate(refiner.anchor_concepts.centers_):
+        np.testing.assert_allclose(centres, tokens[a, : len(centres)], atol=1e-3)  # float16 tokens
+    clip = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz").split("test").motions[3]
+    x = clip.joints[:100].copy()
+    out, report = refiner.refine(x, action=int(clip.action), return_report=True)
+    base = Refiner.pretrained("cmu_mocap", split="train").refine(x, action=int(clip.action))
+    np.testing.assert_array_equal(x, clip.joints[:100])
+    assert "concept_snap" in [c["step"] for c in report.changes]
+    assert 0.01 < np.linalg.norm(out - base, axis=-1).mean() < 0.3
+    lengths = bone_lengths(out, "cmu_mocap")
+    assert (lengths.std(0) / lengths.mean(0)).max() < 1e-3

@@ -9,7 +9,8 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["save_state", "load_state", "FORMAT_VERSION", "pack_metadata", "check_metadata", "pack_lower", "unpack_lower"]
+__all__ = ["save_state", "load_state", "FORMAT_VERSION", "pack_metadata", "check_metadata", "pack_lower", "unpack_lower",
+           "quantize_rows", "dequantize_rows"]
 
 FORMAT_VERSION = "1"
 
@@ -97,3 +98,27 @@ def unpack_lower(packed: np.ndarray, *, symmetric: bool = False) -> np.ndarray:
     if symmetric:
         out[..., cols, rows] = packed
     return out
+
+
+def quantize_rows(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric int8 codes of a weight array ``(rows, ...)``, one scale per row (an output unit):
+    returns ``(codes int8 same shape, scales (rows,) float32)``, ``a ~= codes * scales`` to within half a
+    step (``max |row| / 254``). A row of zeros gets scale 1."""
+    a = np.asarray(a, np.float32)
+    if a.ndim < 2:
+        raise ValueError(f"quantize_rows needs an array of at least 2 dimensions; got shape {a.shape}.")
+    if not np.isfinite(a).all():
+        raise ValueError("quantize_rows needs finite values; got NaN or Inf.")
+    peak = np.abs(a.reshape(len(a), -1)).max(1)
+    scales = np.where(peak > 0, peak / 127.0, 1.0).astype(np.float32)
+    codes = np.clip(np.rint(a / scales.reshape((-1,) + (1,) * (a.ndim - 1))), -127, 127).astype(np.int8)
+    return codes, scales
+
+
+def dequantize_rows(codes: np.ndarray, scales: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`quantize_rows`: ``codes (rows, ...)`` int8 times ``scales (rows,)`` as float32."""
+    codes, scales = np.asarray(codes), np.asarray(scales, np.float32)
+    if codes.dtype != np.int8 or scales.shape != codes.shape[:1]:
+        raise ValueError(f"dequantize_rows needs int8 codes (rows, ...) and one scale per row; got "
+                         f"{codes.dtype} {codes.shape} and scales {scales.shape}.")
+    return codes.astype(np.float32) * scales.reshape((-1,) + (1,) * (codes.ndim - 1))

@@ -9,16 +9,20 @@ import numpy as np
 import torch
 from sklearn.base import BaseEstimator
 
-from refiner.core.serialization import check_metadata, load_state, pack_lower, pack_metadata, save_state, unpack_lower
+from refiner.core.serialization import (check_metadata, dequantize_rows, load_state, pack_lower, pack_metadata,
+                                        quantize_rows, save_state, unpack_lower)
 from refiner.core.validation import check_is_fitted
 from refiner.nn.training import TrainSchedule, resolve_device
 
-__all__ = ["NetworkComponent", "NOT_FITTED"]
+__all__ = ["NetworkComponent", "NOT_FITTED", "INT8_MIN_SIZE"]
 
 NOT_FITTED = "This %(name)s is not fitted yet; call fit() or load() first."
 #: Constructor arguments of estimators that declare the schedule field by field (files saved before
 #: ``schedule`` was one hyper-parameter hold them so), with the schedule field each one sets.
 _FLAT_SCHEDULE = {**{f.name: f.name for f in fields(TrainSchedule)}, "verbose": "progress"}
+#: Weight matrices at least this large are stored as int8 codes by ``save(int8=True)``; biases and
+#: norms, a small share of the bytes, keep float16 (their rounding shifts every unit alike).
+INT8_MIN_SIZE = 1024
 
 
 class NetworkComponent(BaseEstimator):
@@ -76,15 +80,23 @@ class NetworkComponent(BaseEstimator):
         check_is_fitted(self, "network_", msg=NOT_FITTED)
         return sum(p.numel() for p in self.network_.parameters())
 
-    def save(self, path: str | os.PathLike, *, half: bool = False) -> None:
+    def save(self, path: str | os.PathLike, *, half: bool = False, int8: bool = False) -> None:
         """Write network weights and fitted state to one ``.safetensors`` file.
 
-        ``half`` stores floating-point weights as float16 (half the size; loading casts back).
+        ``half`` stores floating-point weights as float16 (half the size; loading casts back). ``int8``
+        stores every weight matrix (a parameter, not a buffer) of at least :data:`INT8_MIN_SIZE` values as
+        int8 codes with one float32 scale per output row (about half of float16; loading multiplies back)
+        and the rest as with ``half``.
         """
         check_is_fitted(self, "network_", msg=NOT_FITTED)
         tensors = {}
+        half = half or int8
+        weights = {name for name, _ in self.network_.named_parameters()}  # buffers (fitted arrays) stay exact
         for k, v in self.network_.state_dict().items():
             v = v.detach().cpu().contiguous()
+            if int8 and k in weights and v.is_floating_point() and v.ndim >= 2 and v.numel() >= INT8_MIN_SIZE:
+                tensors[f"network.{k}.int8"], tensors[f"network.{k}.int8_scale"] = quantize_rows(v.float().numpy())
+                continue
             tensors[f"network.{k}"] = v.half() if half and v.is_floating_point() else v
         arrays = {name: np.asarray(getattr(self, name)) for name in self._fitted_arrays}
         arrays.update({name: np.asarray(getattr(self, name), np.float16 if half else None)
@@ -112,7 +124,12 @@ class NetworkComponent(BaseEstimator):
                 raise ValueError(f"{str(path)!r} lacks the fitted array {name!r} of a {cls.__name__}.")
         network = obj._make_network(fitted)
         state = {k[len("network."):]: torch.from_numpy(v.copy()).float() if v.dtype == np.float16 else torch.from_numpy(v.copy())
-                 for k, v in tensors.items() if k.startswith("network.")}
+                 for k, v in tensors.items() if k.startswith("network.") and not k.endswith((".int8", ".int8_scale"))}
+        for k in [k for k in tensors if k.startswith("network.") and k.endswith(".int8")]:
+            name = k[len("network."):-len(".int8")]
+            if f"network.{name}.int8_scale" not in tensors:
+                raise ValueError(f"{str(path)!r} holds int8 codes for {name!r} without their scales.")
+            state[name] = torch.from_numpy(dequantize_rows(tensors[k], tensors[f"network.{name}.int8_scale"]))
         try:
             network.load_state_dict(state, strict=True)
         except RuntimeError as e:

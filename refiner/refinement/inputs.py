@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["MODES", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_metres",
+__all__ = ["MODES", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_metres",
            "check_metres_each", "check_threads", "thread_limits"]
 
 #: Which refinement steps run after recognition.
@@ -26,6 +26,16 @@ def check_choice(name: str, value: str, choices) -> str:
     if value not in choices:
         raise ValueError(f"unknown {name} {value!r}; known: {', '.join(choices)}.")
     return value
+
+
+def check_choices(name: str, values, choices) -> frozenset:
+    """``values`` (a collection of names, or one name) as a frozenset, each one of ``choices``; else a
+    ``ValueError`` naming the option, what was wrong and the choices."""
+    if isinstance(values, str):
+        values = (values,)
+    if not isinstance(values, (tuple, list, set, frozenset)) or any(v not in choices for v in values):
+        raise ValueError(f"`{name}` must name some of {', '.join(choices)}; got {values!r}.")
+    return frozenset(values)
 
 
 def check_threads(threads):

@@ -11,7 +11,6 @@ concept-snap option (off by default), which moves every anchor onto its action's
 from __future__ import annotations
 
 import copy
-import json
 import os
 from pathlib import Path
 
@@ -35,7 +34,7 @@ from refiner.refinement.converted_refinement import ConvertedRefiner, converts_w
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.infilling import MotionInfiller
-from refiner.refinement.inputs import MODES, auto_threads, check_choice, check_metres, check_metres_each, check_threads, thread_limits
+from refiner.refinement.inputs import MODES, auto_threads, check_choice, check_choices, check_metres, check_metres_each, check_threads, thread_limits
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.report import RefinementReport
@@ -223,12 +222,13 @@ class Refiner:
 
     # ------------------------------------------------------------------ persistence
 
-    def save(self, folder: str | os.PathLike, *, half: bool = False) -> None:
-        """Write every part as safetensors plus ``manifest.json`` (``half`` stores float16 weights).
+    def save(self, folder: str | os.PathLike, *, half: bool = False, int8: tuple = ()) -> None:
+        """Write every part as safetensors plus ``manifest.json`` (``half`` stores float16 weights; the
+        network parts named in ``int8`` store their weight matrices as int8 codes, see ``NetworkComponent.save``).
 
-        The steps' thresholds go with them: each part's own in its file, the re-timing step's in the
-        manifest's ``calibration``.
+        Each step's thresholds go with it: a part's in its file, the re-timing step's in ``calibration``.
         """
+        int8 = check_choices("int8", int8, [n for n in _PARTS if n not in _NO_DEVICE])
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         files = {}
@@ -237,7 +237,7 @@ class Refiner:
             part = getattr(self, name)
             if part is None:
                 continue
-            part.save(path) if name in _NO_DEVICE else part.save(path, half=half)
+            part.save(path) if name in _NO_DEVICE else part.save(path, half=half, int8=name in int8)
             files[name] = {"file": path.name, "sha256": file_sha256(path)}
         calibration = {k: v for k, v in self.manifest.get("calibration", {}).items() if k not in _CALIBRATED}
         write_manifest(folder / "manifest.json", {

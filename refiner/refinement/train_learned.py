@@ -27,7 +27,8 @@ from refiner.refinement.pipeline import _WEIGHTS, Refiner
 from refiner.refinement.timing_estimation import TimingEstimator
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
-           "calibrate_learned", "calibration_split", "CLIP_RATE", "bone_proportion_records", "CONVERTED_SKELETONS"]
+           "calibrate_learned", "calibration_split", "CLIP_RATE", "bone_proportion_records", "CONVERTED_SKELETONS",
+           "fit_anchor_concepts"]
 
 #: Share of held-out real clips the timing estimator may re-time: it changes frames unverified, before
 #: detection. Calibration subjects 9-10 (mean of the 7 families removed): thresholds 1.8 / 2.5 / 3.5 /
@@ -143,10 +144,9 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         else:
             if anchor_concepts is None:
-                poses = np.concatenate([clips[i][anchors[i]] for i in fit_idx])
-                acts = np.concatenate([np.full(len(anchors[i]), actions[i]) for i in fit_idx])
-                anchor_concepts = AnchorConcepts(8 if config == "default" else 2, random_state=random_state).fit(
-                    poses, acts, n_actions=n_actions)
+                anchor_concepts = fit_anchor_concepts(*pick(fit_idx), n_actions=n_actions, config=config,
+                                                      random_state=random_state)
+                anchor_concepts.save(parts_dir / "anchor_concepts.safetensors")  # weights without a base keep them
             est.fit(*pick(fit_idx), anchor_concepts, skeleton=skeleton, validation=pick(cal_idx),
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         est.save(parts_dir / f"{name}.safetensors")
@@ -188,6 +188,15 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
                                       if parts.get("amplitude_restorer") is not None else {})}
     refiner.save(out or folder, half=True)
     return Refiner.load(out or folder)
+
+
+def fit_anchor_concepts(clips, actions, anchors, *, n_actions: int, config: str = "default",
+                        random_state: int = 0) -> AnchorConcepts:
+    """The anchor concepts the repair network attends to: K-means (8 per action, 2 with ``config="tiny"``)
+    over the anchor poses ``clips[i][anchors[i]]`` of clips ``(T_i, J, 3)`` metres with ``actions (N,)``."""
+    poses = np.concatenate([c[a] for c, a in zip(clips, anchors)])
+    acts = np.concatenate([np.full(len(a), act) for a, act in zip(anchors, actions)])
+    return AnchorConcepts(2 if config == "tiny" else 8, random_state=random_state).fit(poses, acts, n_actions=n_actions)
 
 
 def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str = "all", base: str | Path | None = None,
