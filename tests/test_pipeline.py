@@ -7,6 +7,7 @@ import torch
 
 from refiner import Motion
 from refiner.core.skeletons import bone_lengths, get_skeleton
+from refiner.io.datasets import CMU_TEST_SUBJECTS
 from refiner.refinement.pipeline import Refiner, project_bone_lengths, refine, splice
 
 pytestmark = pytest.mark.real_data
@@ -253,6 +254,7 @@ def test_shipped_weights_list_skeleton_split_and_licence():
         assert cmu["skeleton"] == "cmu_mocap" and "commercial products" in cmu["licence"]
         model = Refiner.pretrained("cmu_mocap")  # split "all" falls back to the only CMU weights shipped
         assert isinstance(model, Refiner) and model.manifest["dataset"] == "cmu_mocap"
+        assert not set(model.manifest["subjects"]) & set(CMU_TEST_SUBJECTS)
     with pytest.raises(ValueError, match=r"no shipped weights for skeleton 'humanact12', split 'test'; shipped: .*humanact12 \(humanact12, all\)"):
         Refiner.pretrained("humanact12", split="test")
 
@@ -266,13 +268,18 @@ def test_cmu_weights_refine_real_cmu_clips_single_and_batch_with_reports():
 
     test = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz").split("test")
     clips = [m.with_joints(m.joints[:80]) for m in test if m.n_frames >= 80][:12:4]
-    one, report = refine(clips[0], skeleton="cmu_mocap", return_report=True)  # a Motion with its CMU action
+    model = Refiner.pretrained("cmu_mocap", split="train")  # the weights that never saw these subjects
+    one, report = refine(clips[0], skeleton="cmu_mocap", return_report=True, refiner=model)  # with its CMU action
     assert one.skeleton == "cmu_mocap" and report.action is not None
     batch = np.stack([m.joints for m in clips])
-    out, reports = refine(batch, skeleton="cmu_mocap", return_report=True)  # action unknown
+    out, reports = refine(batch, skeleton="cmu_mocap", return_report=True, refiner=model)  # action unknown
     assert out.shape == batch.shape and len(reports) == len(clips)
     assert 100 * np.linalg.norm(out - batch, axis=-1).mean() < 0.3  # clean held-out clips: under 0.3 cm
     flawed = corrupt(clips[1], "frozen_transition", 2, random_state=0).motion.joints
-    fixed = refine(flawed, skeleton="cmu_mocap")
+    walks = [m.joints[:60] for m in test if m.n_frames >= 60 and test.action_names[m.action] == "walk"]
+    calm, calm_reports = model.refine(np.stack(walks), action="walk", return_report=True)  # labelled: many stand first
+    assert 100 * np.linalg.norm(calm - np.stack(walks), axis=-1).mean() < 0.3  # the amplitude step scaled 24 by 13 cm
+    assert not any(c["step"] == "amplitude" for r in calm_reports for c in r.changes) and model.amplitude_restorer is None
+    fixed = refine(flawed, skeleton="cmu_mocap", refiner=model)
     err = lambda x: np.linalg.norm(x - clips[1].joints, axis=-1).mean()  # noqa: E731
     assert err(fixed) < err(flawed)
