@@ -10,8 +10,8 @@
    detectors, ``detect``), each for the whole batch in one forward pass. Frames where a detector
    stays above its threshold (each calibrated on held-out subjects' real clips) for ``min_run``
    frames are flagged, widened by ``margin`` frames of context on each side.
-2. **Anchor and transition refinement**: each flagged run gets the repair for the flaw group the
-   classifier recognises in it (``repair="typed"``, :data:`TYPED_REPAIRS`): timing flaws are re-timed
+2. **Anchor and transition refinement**: flagged retraces have their loop cut (:mod:`refiner.refinement.retrace`),
+   then each flagged run gets the repair for the flaw group the classifier recognises (:data:`TYPED_REPAIRS`): timing flaws are re-timed
    along their own path where they stall (:mod:`refiner.refinement.repair_candidates`), a body that glides or
    floats is corrected by the repair network (:class:`~refiner.refinement.learned_refinement.FlawRepairer`,
    one forward pass for the batch) and moved back over its planted feet
@@ -32,6 +32,7 @@ from refiner.refinement.anchor_recognition import anchor_peaks
 from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
+from refiner.refinement.retrace import cut_retraces
 from refiner.refinement.noise_filter import filtered_noise
 from refiner.refinement.timing_estimation import estimated_retiming
 from refiner.refinement.report import RefinementReport, start_reports
@@ -129,10 +130,9 @@ def check_detect(detect: str) -> str:
 #: The hand-written repair that stands in for a network's proposal when the weights lack that network.
 STAND_INS = {"denoise": "smooth", "motion_infill": "network_infill", "noise_filter": "smooth"}
 _ANCHOR_THRESHOLD = 0.3
-#: Frames on each side of a run that the selection's flaw score also covers (the seams).
-_SCORE_CONTEXT = 4
-#: Frames by which the hand-written repairs' window is also widened on each side.
-_WIDEN = (0, 4, 8)
+#: Frames on each side of a run that the selection's flaw score also covers (the seams); frames by which
+#: the hand-written repairs' window is also widened on each side.
+_SCORE_CONTEXT, _WIDEN = 4, (0, 4, 8)
 
 
 def noise_ratio(y: np.ndarray, lo: int, hi: int) -> float:
@@ -290,7 +290,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                                    f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
                                    f"0 %); every frame put back on {lengths}"})
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it
-    clips = estimated_retiming(refiner, clips, reports, mode)  # timing first: detection then sees it fixed
+    clips = cut_retraces(refiner, estimated_retiming(refiner, clips, reports, mode), reports, mode)  # timing first
     rec = refiner.flaw_recognizer.predict(clips, actions)
     threshold = float(refiner.flaw_recognizer.threshold_)
     use = set(refiner.detect.split("+"))

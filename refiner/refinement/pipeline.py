@@ -66,9 +66,9 @@ _NO_DEVICE = ("anchor_concepts", "anchor_quality", "amplitude_restorer")
 METHODS = ("learned", "concepts")
 #: Lengths of the rigid skeleton: the clip's medians drawn toward learned proportions, or the medians.
 RIGID_LENGTHS = ("proportions", "median")
-#: Timing flaws: the timing estimator's runs re-timed first, then flagged stalls (``"estimated"``), or only
-#: the stalls in runs the flaw detector flags as timing (``"flagged"``, the release before the estimator).
-RETIMING = ("estimated", "flagged")
+#: Timing flaws: the estimator's runs re-timed first (``"estimated"``); flagged retraces cut and the stalls in runs
+#: flagged as timing re-timed (``"flagged"``, and after the estimator); the stalls only (``"stalls"``).
+RETIMING = ("estimated", "flagged", "stalls")
 #: Noise: flagged runs, then clips noisy throughout (``"filter"``), or flagged runs only (``"flagged"``).
 DENOISING = ("filter", "flagged")
 #: Clips that move too little for their action: scaled back (``"restore"``) or kept (``"keep"``).
@@ -108,9 +108,9 @@ class Refiner:
         The learned re-timing step (:mod:`refiner.refinement.timing_estimation`), noise filter
         (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead) and
         amplitude step (:mod:`refiner.refinement.amplitude`; ``amplitude="keep"`` skips it).
-    retiming : {"estimated", "flagged"}, optional
-        ``"estimated"`` (default when there is a ``timing_estimator``): the runs it finds are re-timed before
-        detection; ``"flagged"``: only stalls in runs the flaw detector flags as timing.
+    retiming : {"estimated", "flagged", "stalls"}, optional
+        ``"estimated"`` (default with a ``timing_estimator``): its runs re-timed before detection, then as "flagged":
+        flagged retraces cut (:mod:`refiner.refinement.retrace`) and flagged stalls re-timed; ``"stalls"``: stalls only.
     denoising : {"filter", "flagged"}, optional
         ``"filter"`` (default when there is a ``noise_filter``): clips noisy throughout are denoised last;
         ``"flagged"``: only flagged noise runs are.
@@ -214,7 +214,7 @@ class Refiner:
         self.denoising = check_choice("denoising", denoising or ("flagged" if noise_filter is None else "filter"), DENOISING)
         for option, value, part, name in (("retiming", self.retiming, timing_estimator, "timing_estimator"),
                                           ("denoising", self.denoising, noise_filter, "noise_filter")):
-            if value != "flagged" and part is None:
+            if value in ("estimated", "filter") and part is None:
                 raise ValueError(f"{option}={value!r} needs a `{name}`, which these weights lack; use 'flagged'.")
         if self.rigid_lengths == "proportions" and self.bone_proportions is None:
             raise ValueError("rigid_lengths='proportions' needs the bone proportions of the weights' manifest "

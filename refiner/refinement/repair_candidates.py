@@ -28,11 +28,11 @@ from refiner.concepts.transitions import arc_length_profile
 from refiner.core.contact import planted_slip
 from refiner.core.skeletons import Skeleton
 
-__all__ = ["stall_window", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
+__all__ = ["frame_speed", "speed_profile", "resample_path", "stall_window", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
            "CANDIDATES"]
 
 
-def _frame_speed(y: np.ndarray) -> tuple[np.ndarray, float]:
+def frame_speed(y: np.ndarray) -> tuple[np.ndarray, float]:
     """Mean joint speed ``(T - 1,)`` of ``y (T, J, 3)`` (``speed[t]``: frame t -> t + 1) and its median."""
     speed = np.linalg.norm(np.diff(y, axis=0), axis=-1).mean(-1)
     return speed, max(float(np.median(speed)), 1e-9)
@@ -43,7 +43,7 @@ def _bounds(n: int, lo: int, hi: int) -> tuple[int, int]:
     return max(lo - 1, 0), min(hi, n - 1)
 
 
-def _speed_profile(y: np.ndarray, a: int, b: int, length: float) -> np.ndarray:
+def speed_profile(y: np.ndarray, a: int, b: int, length: float) -> np.ndarray:
     """Cumulative share of ``length`` covered at frames ``a..b``: a cubic Hermite curve whose slopes
     are the mean-joint speeds just outside the run, made non-decreasing."""
     n_steps = b - a
@@ -56,7 +56,7 @@ def _speed_profile(y: np.ndarray, a: int, b: int, length: float) -> np.ndarray:
     return s / length if length > 1e-9 else tau
 
 
-def _resample_path(frames: np.ndarray, progress: np.ndarray, target: np.ndarray) -> np.ndarray:
+def resample_path(frames: np.ndarray, progress: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Frames at the times where the non-decreasing ``progress (L,)`` reaches ``target (L,)``."""
     progress = progress + np.arange(len(progress)) * 1e-9  # strictly increasing for interpolation
     idx = np.interp(target * progress[-1], progress, np.arange(len(frames)))
@@ -75,7 +75,7 @@ def retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton) -> np.ndarra
     s = arc_length_profile(frames)
     length = float(np.linalg.norm(np.diff(frames, axis=0), axis=-1).mean(-1).sum())
     out = y.copy()
-    out[a : b + 1] = _resample_path(frames, s, _speed_profile(y, a, b, length)).astype(y.dtype)
+    out[a : b + 1] = resample_path(frames, s, speed_profile(y, a, b, length)).astype(y.dtype)
     out[a], out[b] = y[a], y[b]
     return out
 
@@ -87,7 +87,7 @@ def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall:
     the run; None: not asked), else no change. Re-timing a run that never stops moved it further from
     the truth (time warps) while it cured stalls; a stop that nothing catches up with afterwards is a
     rest (the still end of a clip), and spreading the motion over it cost one clip 4.7 cm."""
-    speed, median = _frame_speed(y)
+    speed, median = frame_speed(y)
     window = speed[max(lo - 1, 0) : hi]
     still = window < stall * median
     run = np.convolve(still.astype(int), np.ones(min_frames, int), mode="valid")
@@ -104,7 +104,7 @@ def stall_window(y: np.ndarray, lo: int, hi: int, *, stall: float = 0.1, rush: f
     """``[lo, hi)`` grown over the stall before it (mean joint speed under ``stall`` of the clip's median)
     and the rush after it (over ``rush`` times the median), by at most ``reach`` frames each side: a
     stalled transition must be re-timed from where it stops to where it has caught up."""
-    speed, median = _frame_speed(y)
+    speed, median = frame_speed(y)
     a, c = lo, hi
     while a > max(lo - reach, 1) and speed[a - 1] < stall * median:
         a -= 1
@@ -129,7 +129,7 @@ def forward_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton) -> n
     progress[-1] = 1.0
     length = float(np.sqrt(norm2 / frames.shape[1]))
     out = y.copy()
-    out[a : b + 1] = _resample_path(frames, progress, _speed_profile(y, a, b, length)).astype(y.dtype)
+    out[a : b + 1] = resample_path(frames, progress, speed_profile(y, a, b, length)).astype(y.dtype)
     out[a], out[b] = y[a], y[b]
     return out
 

@@ -1,0 +1,92 @@
+"""The retrace cut: motion that turns back over its own path is found, cut and re-timed; real motion is left."""
+import numpy as np
+import pytest
+
+from refiner.core.signal import resample
+from refiner.evaluation.flaws import reversed_transition
+from refiner.refinement.pipeline import Refiner
+from refiner.refinement.report import start_reports
+from refiner.refinement.retrace import MAX_RATIO, cut_retrace, cut_retraces, find_retraces, turn_frames
+
+
+def _path(n_frames=48, seed=0):
+    """A smooth 24-joint motion ``(T, 24, 3)`` that keeps going one way (a cubic in time per coordinate)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, n_frames)[:, None, None]
+    a, b, c = (rng.normal(scale=s, size=(1, 24, 3)) for s in (0.4, 0.2, 0.1))
+    return (a * t + b * t**2 + c * t**3).astype(np.float32)
+
+
+def _reversed(x, lo, hi, amplitude=2.5):
+    """Frames ``lo..hi`` re-timed by ``u + a sin(2 pi u) / (2 pi)``: part of them plays backwards."""
+    out = x.copy()
+    u = np.linspace(0.0, 1.0, hi - lo + 1)
+    out[lo : hi + 1] = resample(x, lo + (hi - lo) * (u + amplitude * np.sin(2 * np.pi * u) / (2 * np.pi)))
+    return out
+
+
+def _err(a, b):
+    return 100 * float(np.linalg.norm(a - b, axis=-1).mean())
+
+
+def test_a_seeded_loop_is_found_and_cut_and_the_input_kept():
+    clean = _path()
+    flawed = _reversed(clean, 12, 32)
+    given = flawed.copy()
+    assert turn_frames(clean).size == 0 and find_retraces(clean) == []
+    loops = find_retraces(flawed)
+    assert len(loops) == 1
+    loop = loops[0]
+    assert 12 <= loop.start < loop.turn < loop.back_turn < loop.resume <= 32 and loop.ratio < MAX_RATIO
+    repaired, (lo, hi) = cut_retrace(flawed, loop)
+    np.testing.assert_array_equal(flawed, given)  # the input is not modified
+    assert (repaired[:lo] == flawed[:lo]).all() and (repaired[hi + 1 :] == flawed[hi + 1 :]).all()
+    assert _err(repaired, clean) < 0.5 * _err(flawed, clean)
+
+
+def test_a_path_that_returns_another_way_is_no_retrace():
+    """Out along one arc and back along another (a real reach and return): turns, but no retrace."""
+    t = np.linspace(0.0, 2 * np.pi, 50)[:, None, None]
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(scale=0.2, size=(2, 1, 24, 3))
+    x = (a * (1 - np.cos(t)) + b * np.sin(t)).astype(np.float32)  # an ellipse per joint: back by the other side
+    assert find_retraces(x) == []
+    back_and_forth = (a * (1 - np.cos(t))).astype(np.float32)  # exactly the same way back: a retrace geometrically
+    assert turn_frames(back_and_forth).size >= 1
+
+
+@pytest.fixture(scope="module")
+def model():
+    return Refiner.pretrained("humanact12", split="train")
+
+
+@pytest.mark.real_data
+def test_real_clips_of_the_held_out_subjects_are_never_cut(humanact12, model):
+    """Real back-and-forth motion (a dumbbell lifted and lowered) retraces its path too, but is not flagged."""
+    looped = 0
+    for motion in humanact12.split("test").motions:
+        clip = motion.joints[None]
+        looped += bool(find_retraces(clip[0], max_span=100))
+        reports = start_reports(motion.n_frames, [None], "full", model.action_names, batched=True)
+        np.testing.assert_array_equal(cut_retraces(model, clip, reports, "full"), clip)
+        assert not reports[0].changes
+    assert looped >= 3  # some real clips retrace as exactly as the threshold asks: the span and the gate keep them
+
+
+@pytest.mark.real_data
+def test_seeded_reversals_of_real_clips_are_cut_and_come_closer(humanact12, model):
+    test = humanact12.split("test")
+    clips = [m for m in test.motions if m.n_frames >= 40][:24]
+    flawed = [reversed_transition(m, 2, random_state=k).motion for k, m in enumerate(clips)]
+    before = np.mean([_err(f.joints, m.joints) for f, m in zip(flawed, clips)])
+    refined, cut, stalls_only = [], 0, Refiner.pretrained("humanact12", split="train", retiming="stalls")
+    for f, m in zip(flawed, clips):
+        out, report = model.refine(f, action=m.action, return_report=True)
+        refined.append(_err(out.joints, m.joints))
+        changes = [c for c in report.changes if c.get("repair") == "retrace_cut"]
+        cut += bool(changes)
+        assert all("retraced its path" in c["reason"] for c in changes)
+    assert cut >= 8
+    assert np.mean(refined) < 0.8 * before
+    off = [stalls_only.refine(f, action=m.action, return_report=True)[1] for f, m in zip(flawed[:6], clips[:6])]
+    assert not any(c.get("repair") == "retrace_cut" for r in off for c in r.changes)
