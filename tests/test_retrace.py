@@ -6,15 +6,21 @@ from refiner.core.signal import resample
 from refiner.evaluation.flaws import reversed_transition
 from refiner.refinement.pipeline import Refiner
 from refiner.refinement.report import start_reports
-from refiner.refinement.retrace import MAX_RATIO, cut_retrace, cut_retraces, find_retraces, turn_frames
+from refiner.refinement.retrace import (MAX_RATIO, MAX_SPAN, MIN_FLAW_PROBABILITY, cut_retrace, cut_retraces,
+                                       find_retraces, retrace_window, turn_frames)
 
 
 def _path(n_frames=48, seed=0):
-    """A smooth 24-joint motion ``(T, 24, 3)`` that keeps going one way (a cubic in time per coordinate)."""
+    """A rigid body of 24 points ``(T, 24, 3)`` turning about the vertical and moving one way (both
+    quadratic in time): its bone lengths never change, so the refiner's bone projection keeps it."""
     rng = np.random.default_rng(seed)
-    t = np.linspace(0.0, 1.0, n_frames)[:, None, None]
-    a, b, c = (rng.normal(scale=s, size=(1, 24, 3)) for s in (0.4, 0.2, 0.1))
-    return (a * t + b * t**2 + c * t**3).astype(np.float32)
+    t = np.linspace(0.0, 1.0, n_frames)
+    pose = rng.normal(scale=0.3, size=(24, 3))
+    angle = 1.5 * t + 0.8 * t**2
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.stack([np.stack([c, 0 * c, s], -1), np.stack([0 * c, 1 + 0 * c, 0 * c], -1), np.stack([-s, 0 * c, c], -1)], 1)
+    shift = np.outer(t, rng.normal(scale=0.5, size=3)) + np.outer(t**2, rng.normal(scale=0.3, size=3))
+    return (np.einsum("tij,kj->tki", rot, pose) + shift[:, None]).astype(np.float32)
 
 
 def _reversed(x, lo, hi, amplitude=2.5):
@@ -53,6 +59,63 @@ def test_a_path_that_returns_another_way_is_no_retrace():
     assert find_retraces(x) == []
     back_and_forth = (a * (1 - np.cos(t))).astype(np.float32)  # exactly the same way back: a retrace geometrically
     assert turn_frames(back_and_forth).size >= 1
+
+
+def test_a_loop_longer_than_the_span_limit_is_left():
+    """A whole repetition (a 60-frame transition played back over half of itself) is no glitch to cut."""
+    clean = _path(100, seed=1)
+    flawed = _reversed(clean, 10, 80)
+    assert find_retraces(flawed, max_back=40) == []
+    (loop,) = find_retraces(flawed, max_back=40, max_span=100)
+    assert loop.resume - loop.start > MAX_SPAN
+
+
+class _Classifier:
+    """Stands in for the flaw classifier: the same probability everywhere."""
+
+    def __init__(self, probability):
+        self.probability, self.threshold_ = probability, 0.95
+
+    def predict(self, joints):
+        return np.full(np.shape(joints)[:2], self.probability)
+
+
+class _Refiner:
+    def __init__(self, probability, retiming="flagged"):
+        self.flaw_classifier, self.retiming, self.skeleton = _Classifier(probability), retiming, "humanact12"
+
+
+def _cut(refiner, clips):
+    reports = start_reports(clips.shape[1], [None] * len(clips), "full", (), batched=True)
+    return cut_retraces(refiner, clips, reports, "full"), reports
+
+
+def test_the_classifier_gate_and_the_option_decide():
+    clean = _path(60)
+    flawed = _reversed(clean, 12, 32)[None]
+    for refiner, cut in ((_Refiner(MIN_FLAW_PROBABILITY - 0.01), False), (_Refiner(MIN_FLAW_PROBABILITY), True),
+                         (_Refiner(1.0, retiming="stalls"), False)):
+        out, reports = _cut(refiner, flawed)
+        assert (not np.array_equal(out, flawed)) == cut == bool(reports[0].changes)
+    out, reports = _cut(_Refiner(1.0), flawed)
+    assert "moved" in reports[0].changes[0]["reason"] and _err(out[0], clean) < _err(flawed[0], clean)
+    np.testing.assert_array_equal(cut_retraces(_Refiner(1.0), flawed, reports, "anchor"), flawed)  # a transition step
+
+
+def test_two_loops_are_cut_apart_and_nothing_outside_their_windows_changes():
+    clean = _path(120, seed=2)
+    flawed = _reversed(_reversed(clean, 10, 30), 70, 92)
+    out, reports = _cut(_Refiner(1.0), flawed[None])
+    windows = [(c["start"], c["stop"]) for c in reports[0].changes]
+    assert len(windows) == 2 and (windows[0][1] <= windows[1][0] or windows[1][1] <= windows[0][0])
+    inside = np.zeros(len(clean), bool)
+    for lo, hi in windows:
+        inside[lo:hi] = True
+    np.testing.assert_array_equal(out[0][~inside], flawed[~inside])
+    assert _err(out[0], clean) < 0.5 * _err(flawed, clean)
+    loops = find_retraces(flawed)
+    assert [retrace_window(flawed, loop) for loop in loops] == sorted(
+        (lo, hi - 1) for lo, hi in windows)
 
 
 @pytest.fixture(scope="module")

@@ -28,7 +28,7 @@ from refiner.concepts.transitions import arc_length_profile
 from refiner.core.contact import planted_slip
 from refiner.core.skeletons import Skeleton
 
-__all__ = ["frame_speed", "speed_profile", "resample_path", "stall_window", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
+__all__ = ["frame_speed", "speed_profile", "resample_path", "retime_path", "stall_window", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
            "CANDIDATES"]
 
 
@@ -66,18 +66,23 @@ def resample_path(frames: np.ndarray, progress: np.ndarray, target: np.ndarray) 
     return frames[i0] * (1 - w) + frames[i1] * w
 
 
+def retime_path(y: np.ndarray, a: int, b: int, path: np.ndarray) -> np.ndarray:
+    """``y (T, J, 3)`` with frames ``a..b`` (inclusive) travelling along ``path (L, J, 3)`` (by arc length)
+    at a smooth speed that joins the speeds just outside; frames ``a`` and ``b`` keep their poses."""
+    path = np.asarray(path, np.float64)
+    length = float(np.linalg.norm(np.diff(path, axis=0), axis=-1).mean(-1).sum())
+    out = y.copy()
+    out[a : b + 1] = resample_path(path, arc_length_profile(path), speed_profile(y, a, b, length)).astype(y.dtype)
+    out[a], out[b] = y[a], y[b]
+    return out
+
+
 def retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton) -> np.ndarray:
     """Re-time frames ``lo..hi-1`` along their own path (arc length) with a smooth speed profile."""
     a, b = _bounds(len(y), lo, hi)
     if b - a < 2:
         return y.copy()
-    frames = y[a : b + 1].astype(np.float64)
-    s = arc_length_profile(frames)
-    length = float(np.linalg.norm(np.diff(frames, axis=0), axis=-1).mean(-1).sum())
-    out = y.copy()
-    out[a : b + 1] = resample_path(frames, s, speed_profile(y, a, b, length)).astype(y.dtype)
-    out[a], out[b] = y[a], y[b]
-    return out
+    return retime_path(y, a, b, y[a : b + 1])
 
 
 def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall: float = 0.1,
