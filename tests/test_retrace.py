@@ -40,6 +40,10 @@ def test_a_seeded_loop_is_found_and_cut_and_the_input_kept():
     flawed = _reversed(clean, 12, 32)
     given = flawed.copy()
     assert turn_frames(clean).size == 0 and find_retraces(clean) == []
+    with pytest.raises(ValueError, match=r"\(T, J, 3\)"):
+        turn_frames(flawed.reshape(len(flawed), -1))
+    batch = turn_frames(np.stack([clean, flawed]))
+    assert batch[0].size == 0 and np.array_equal(batch[1], turn_frames(flawed))
     loops = find_retraces(flawed)
     assert len(loops) == 1
     loop = loops[0]
