@@ -70,9 +70,8 @@ _GROUP_NAMES = tuple(GROUPS)
 #:   classifier's "noise" there is motion the recogniser expects. Verified, as the other groups:
 #:   jitter +17.7 % (the rigid-skeleton step), a2m untouched; **+12.5 %** in all (wrong_anchor -1.8,
 #:   anchor_drift -0.9, jitter +17.7, frozen +42.2, time_warp -0.1; clean clips untouched);
-#: - the stall re-timing's window widened by 2 / 4 / 6 / 8 / 12 frames each side (a stall starts at
-#:   the anchor, before the detector is sure): frozen +45.9 / **+49.5** / +41.2 / +36.2 / +26.4 %,
-#:   time_warp -0.1 % throughout: **+13.5 %** in all.
+#: - the stall re-timing's window widened by 2 / 4 / 6 / 8 / 12 frames each side (a stall starts at the anchor,
+#:   before the detector is sure): frozen +45.9 / **+49.5** / +41.2 / +36.2 / +26.4 %, time_warp -0.1 %: **+13.5 %**.
 #: - the flaw denoiser (:class:`~refiner.refinement.flaw_denoiser.FlawDenoiser`, classifier retrained with
 #:   limb flaws that never move the root): the shipped table +13.6 % (jitter +17.7, foot_sliding +37.8);
 #:   noise -> ``denoise``, verified or not, widened by 4 or not: jitter +17.6 to +17.8 %, the same mean
@@ -114,8 +113,8 @@ NOISE_RATIO = 1.3
 #: A timing run is grown over the stall before it and the rush after it (:func:`stall_window`) before it
 #: is re-timed; False: the widened run alone (frozen 58.9 % vs 50.6 %).
 STALL_WINDOW = True
-#: Detectors that can flag frames (``detect="classifier+recognizer"`` takes the union): the kinematic flaw
-#: classifier, the recognition network's flaw probability, the repair network's or the denoiser's correction.
+#: Detectors that can flag frames (``detect="classifier+recognizer"``: the union): the kinematic flaw classifier,
+#: the recognition network's flaw probability, the repair network's or the denoiser's correction.
 DETECTORS = ("classifier", "recognizer", "correction", "denoiser")
 
 
@@ -290,19 +289,19 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                                    f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
                                    f"0 %); every frame put back on {lengths}"})
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it
-    clips = cut_retraces(refiner, estimated_retiming(refiner, clips, reports, mode), reports, mode)  # timing first
-    rec = refiner.flaw_recognizer.predict(clips, actions)
-    threshold = float(refiner.flaw_recognizer.threshold_)
-    use = set(refiner.detect.split("+"))
-    use_rec, use_cor, use_clf = "recognizer" in use, "correction" in use, "classifier" in use
+    clips = estimated_retiming(refiner, clips, reports, mode)  # timing first
+    use_rec, use_cor, use_clf, use_den = (n in refiner.detect.split("+") for n in ("recognizer", "correction", "classifier", "denoiser"))
     clf_all = refiner.flaw_classifier.predict_all(clips) if (use_clf or refiner.repair == "typed") else None
+    cut = cut_retraces(refiner, clips, reports, mode, None if clf_all is None else clf_all[..., 0])
+    if clf_all is not None and (again := np.flatnonzero((cut != clips).any(axis=(1, 2, 3)))).size:
+        clf_all[again] = refiner.flaw_classifier.predict_all(cut[again])  # a cut clip is judged anew
+    clips, rec, threshold = cut, refiner.flaw_recognizer.predict(cut, actions), float(refiner.flaw_recognizer.threshold_)
     if use_clf:
         clf = clf_all[..., 0]
         clf_threshold = float(refiner.flaw_classifier.threshold_)
     if use_cor:
         correction = refiner.flaw_repairer.correction(clips, actions)
         cor_threshold = float(refiner.flaw_repairer.correction_threshold_)
-    use_den = "denoiser" in use
     if use_den:
         denoised = refiner.flaw_denoiser.correction(clips)
         den_threshold = float(refiner.flaw_denoiser.threshold_)

@@ -173,22 +173,27 @@ def cut_retrace(joints: np.ndarray, loop: Retrace, window: tuple[int, int] | Non
     return retime_path(np.asarray(joints), lo, hi, path), (lo, hi)
 
 
-def cut_retraces(refiner, clips: np.ndarray, reports: list, mode: str) -> np.ndarray:
+def cut_retraces(refiner, clips: np.ndarray, reports: list, mode: str, flaw_probability: np.ndarray | None = None
+                 ) -> np.ndarray:
     """The refiner's retrace step: in ``clips (B, T, J, 3)``, each retrace that the flaw classifier flags between
     its turns (2 frames either side too) is cut (the most exact first; none whose window overlaps a cut one), the
     changed frames put back on the clip's bone lengths and the change written to the clip's report. A
     transition step: not in ``mode="anchor"``, nor with ``refiner.retiming == "stalls"`` or without a flaw
-    classifier."""
+    classifier. ``flaw_probability (B, T)``: the classifier's on ``clips`` when the caller has it (then clips it
+    never flags are not searched: the search is the step's cost)."""
     classifier = getattr(refiner, "flaw_classifier", None)
     if classifier is None or getattr(refiner, "retiming", "flagged") == "stalls" or mode == "anchor":
         return clips
     turns = turn_frames(clips) if len(clips) else []
-    found = {b: loops for b in range(len(clips)) if len(turns[b]) > 1
+    flagged = (np.ones(len(clips), bool) if flaw_probability is None
+               else np.asarray(flaw_probability).max(axis=1, initial=0.0) >= MIN_FLAW_PROBABILITY)
+    found = {b: loops for b in range(len(clips)) if len(turns[b]) > 1 and flagged[b]
              and (loops := find_retraces(clips[b], max_ratio=MAX_RATIO, max_span=MAX_SPAN, turns=turns[b]))}
     if not found:
         return clips
     out = clips.copy()
-    prob = classifier.predict(clips[list(found)])
+    prob = (classifier.predict(clips[list(found)]) if flaw_probability is None
+            else np.asarray(flaw_probability)[list(found)])
     for k, (b, loops) in enumerate(found.items()):
         changed = np.zeros(clips.shape[1], bool)
         for loop in sorted(loops, key=lambda loop: loop.ratio):  # the most exact first; one overlapping a cut one: left
