@@ -7,7 +7,8 @@ import pytest
 from scipy.ndimage import gaussian_filter1d
 
 from refiner.core.validation import NotFittedError
-from refiner.refinement.noise_filter import NoiseFilter, window_features
+from refiner.evaluation.flaws import corrupt
+from refiner.refinement.noise_filter import NOISE_LOW, NOISE_PROBABILITY, NOISE_RUN, NoiseFilter, noise_run_frames, window_features
 from refiner.refinement.pipeline import Refiner
 
 
@@ -112,3 +113,46 @@ def test_shipped_refiner_denoises_clips_noisy_throughout(humanact12, rng, one_to
     assert not any(c["step"] == "noise" for c in report.changes)
     with pytest.raises(ValueError, match="denoising='filter' needs a `noise_filter`"):
         Refiner(*(None,) * 6, model.flaw_recognizer, model.flaw_repairer, model.flaw_classifier, denoising="filter")
+
+
+def test_noise_runs_need_a_seed_of_noise_run_frames_and_grow_while_above_the_low_mark():
+    high, mid, low = NOISE_PROBABILITY + 0.05, (NOISE_PROBABILITY + NOISE_LOW) / 2, NOISE_LOW - 0.1
+    row = np.full(20, low)
+    row[3:5] = mid
+    row[5 : 5 + NOISE_RUN] = high  # a seed, grown over the mid frames around it
+    row[5 + NOISE_RUN : 11] = mid
+    row[14 : 14 + NOISE_RUN - 1] = high  # too short a seed
+    frames = noise_run_frames(np.stack([row, np.full(20, low)]))
+    assert frames.shape == (2, 20) and not frames[1].any()
+    np.testing.assert_array_equal(np.flatnonzero(frames[0]), np.arange(3, 11))
+
+
+@pytest.mark.real_data
+def test_noise_runs_the_classifier_sees_are_denoised_and_clean_clips_left(humanact12, one_torch_thread):
+    """Jitter in a real clip: the classifier's noise group finds it where its flaw threshold does not flag it."""
+    clean = humanact12[0]
+    jittered = corrupt(clean, "transition_jitter", 2, random_state=0).motion
+    model = Refiner.pretrained("humanact12", split="train")
+    before = Refiner.pretrained("humanact12", split="train", denoising="throughout")
+    out, report = model.refine(jittered, return_report=True)
+    runs = [c for c in report.changes if "noise-group" in c["reason"]]
+    assert len(runs) == 1 and runs[0]["repair"] == "noise_filter"
+    assert _error(out.joints, clean.joints) < 0.9 * _error(before.refine(jittered).joints, clean.joints)
+    _, report = before.refine(jittered, return_report=True)
+    assert not any("noise-group" in c["reason"] for c in report.changes)
+    for motion in humanact12.motions[:40]:  # clean clips: no noise run
+        _, report = model.refine(motion, return_report=True)
+        assert not any("noise-group" in c["reason"] for c in report.changes)
+
+
+@pytest.mark.real_data
+def test_denoising_chosen_frames_leaves_every_other_frame_exactly(fitted, rng):
+    nf, held = fitted
+    x = np.stack([c[:40] for c in held if len(c) >= 40][:3]).astype(np.float32)
+    noisy = x + (0.01 * rng.normal(size=x.shape)).astype(np.float32)
+    frames = np.zeros(x.shape[:2], bool)
+    frames[0, 10:20] = frames[2, 30:] = True
+    out = nf.denoise(noisy, frames)
+    np.testing.assert_array_equal(out[~frames], noisy[~frames])
+    assert _error(out[frames], x[frames]) < 0.8 * _error(noisy[frames], x[frames])
+    np.testing.assert_array_equal(nf.denoise(noisy), nf.denoise(noisy, np.ones(x.shape[:2], bool)))

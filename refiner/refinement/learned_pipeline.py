@@ -396,4 +396,5 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                 else:
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
-    return filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports)  # noise: last
+    noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]
+    return filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, clips, noise)  # noise: last

@@ -69,8 +69,8 @@ RIGID_LENGTHS = ("proportions", "median")
 #: Timing flaws: the estimator's runs re-timed first (``"estimated"``); flagged retraces cut and the stalls in runs
 #: flagged as timing re-timed (``"flagged"``, and after the estimator); the stalls only (``"stalls"``).
 RETIMING = ("estimated", "flagged", "stalls")
-#: Noise: flagged runs, then clips noisy throughout (``"filter"``), or flagged runs only (``"flagged"``).
-DENOISING = ("filter", "flagged")
+#: Noise: flagged runs, noise-group runs, clips noisy throughout (``"filter"``); no noise-group runs (``"throughout"``); flagged runs only.
+DENOISING = ("filter", "throughout", "flagged")
 #: Clips that move too little for their action: scaled back (``"restore"``) or kept (``"keep"``).
 AMPLITUDE = ("restore", "keep")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
@@ -111,9 +111,9 @@ class Refiner:
     retiming : {"estimated", "flagged", "stalls"}, optional
         ``"estimated"`` (default with a ``timing_estimator``): its runs re-timed before detection, then as "flagged":
         flagged retraces cut (:mod:`refiner.refinement.retrace`) and flagged stalls re-timed; ``"stalls"``: stalls only.
-    denoising : {"filter", "flagged"}, optional
-        ``"filter"`` (default when there is a ``noise_filter``): clips noisy throughout are denoised last;
-        ``"flagged"``: only flagged noise runs are.
+    denoising : {"filter", "throughout", "flagged"}, optional
+        ``"filter"`` (default when there is a ``noise_filter``): runs the flaw classifier's noise group finds, then
+        clips noisy throughout, are denoised last; ``"throughout"``: the latter only; ``"flagged"``: neither.
     concept_snap : float in [0, 1], default=0
         The concept-snap option (:mod:`refiner.refinement.concept_snap`): a clip of a given action has its
         anchors moved this share of the way onto the action's nearest anchor concepts. It trades fidelity
@@ -214,7 +214,7 @@ class Refiner:
         self.denoising = check_choice("denoising", denoising or ("flagged" if noise_filter is None else "filter"), DENOISING)
         for option, value, part, name in (("retiming", self.retiming, timing_estimator, "timing_estimator"),
                                           ("denoising", self.denoising, noise_filter, "noise_filter")):
-            if value in ("estimated", "filter") and part is None:
+            if value in ("estimated", "filter", "throughout") and part is None:
                 raise ValueError(f"{option}={value!r} needs a `{name}`, which these weights lack; use 'flagged'.")
         if self.rigid_lengths == "proportions" and self.bone_proportions is None:
             raise ValueError("rigid_lengths='proportions' needs the bone proportions of the weights' manifest "
