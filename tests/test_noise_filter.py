@@ -137,9 +137,20 @@ def test_noise_runs_the_classifier_sees_are_denoised_and_clean_clips_left(humana
     out, report = model.refine(jittered, return_report=True)
     runs = [c for c in report.changes if "noise-group" in c["reason"]]
     assert len(runs) == 1 and runs[0]["repair"] == "noise_filter"
-    assert _error(out.joints, clean.joints) < 0.9 * _error(before.refine(jittered).joints, clean.joints)
-    _, report = before.refine(jittered, return_report=True)
-    assert not any("noise-group" in c["reason"] for c in report.changes)
+    previous, report_before = before.refine(jittered, return_report=True)
+    assert _error(out.joints, clean.joints) < 0.9 * _error(previous.joints, clean.joints)
+    assert not any("noise-group" in c["reason"] for c in report_before.changes)
+    outside = np.ones(clean.n_frames, bool)
+    outside[runs[0]["start"] : runs[0]["stop"]] = False
+    np.testing.assert_array_equal(out.joints[outside], previous.joints[outside])  # the step changes its runs only
+    seen = 0
+    for mode in ("anchor", "transition"):  # a run holding a recognised anchor is an anchor step
+        _, report = model.refine(jittered, mode=mode, return_report=True)
+        for change in (c for c in report.changes if "noise-group" in c["reason"]):
+            held = [a for a in report.anchors if change["start"] <= a < change["stop"]]
+            assert bool(held) == (mode == "anchor")
+            seen += 1
+    assert seen == 1  # the one run, in one of the two modes
     for motion in humanact12.motions[:40]:  # clean clips: no noise run
         _, report = model.refine(motion, return_report=True)
         assert not any("noise-group" in c["reason"] for c in report.changes)

@@ -5,6 +5,7 @@ import pytest
 from refiner.core.signal import resample
 from refiner.evaluation.flaws import reversed_transition
 from refiner.refinement.pipeline import Refiner
+from refiner.refinement import retrace
 from refiner.refinement.report import start_reports
 from refiner.refinement.retrace import (MAX_RATIO, MAX_SPAN, MIN_FLAW_PROBABILITY, cut_retrace, cut_retraces,
                                        find_retraces, retrace_window, turn_frames)
@@ -106,17 +107,19 @@ def test_the_classifier_gate_and_the_option_decide():
     np.testing.assert_array_equal(cut_retraces(_Refiner(1.0), flawed, reports, "anchor"), flawed)  # a transition step
 
 
-def test_a_given_flaw_probability_is_used_in_place_of_the_classifier():
+def test_a_given_flaw_probability_is_used_in_place_of_the_classifier(monkeypatch):
     """The pipeline passes the probability it has: the same cut, and clips never flagged are not searched."""
     flawed = np.stack([_reversed(_path(60), 12, 32), _reversed(_path(60, seed=3), 12, 32)])
     cut, _ = _cut(_Refiner(1.0), flawed)
     assert not np.array_equal(cut[1], flawed[1])  # both clips hold a loop
     reports = start_reports(60, [None, None], "full", (), batched=True)
     given = np.stack([np.full(60, 1.0), np.full(60, MIN_FLAW_PROBABILITY - 0.01)])
+    searched = []
+    monkeypatch.setattr(retrace, "find_retraces", lambda joints, **kw: searched.append(1) or find_retraces(joints, **kw))
     out = cut_retraces(_Refiner(0.0), flawed, reports, "full", given)  # the stand-in classifier would refuse both
     np.testing.assert_array_equal(out[0], cut[0])
     np.testing.assert_array_equal(out[1], flawed[1])
-    assert reports[0].changes and not reports[1].changes
+    assert reports[0].changes and not reports[1].changes and len(searched) == 1  # the unflagged clip: not searched
 
 
 def test_two_loops_are_cut_apart_and_nothing_outside_their_windows_changes():

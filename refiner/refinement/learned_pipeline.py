@@ -291,7 +291,8 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it
     clips = estimated_retiming(refiner, clips, reports, mode)  # timing first
     use_rec, use_cor, use_clf, use_den = (n in refiner.detect.split("+") for n in ("recognizer", "correction", "classifier", "denoiser"))
-    clf_all = refiner.flaw_classifier.predict_all(clips) if (use_clf or refiner.repair == "typed") else None
+    clf_all = (refiner.flaw_classifier.predict_all(clips) if use_clf or refiner.repair == "typed" or (refiner.denoising == "filter"
+               and getattr(refiner, "flaw_classifier", None) is not None) else None)  # noise runs: filtered_noise
     cut = cut_retraces(refiner, clips, reports, mode, None if clf_all is None else clf_all[..., 0])
     if clf_all is not None and (again := np.flatnonzero((cut != clips).any(axis=(1, 2, 3)))).size:
         clf_all[again] = refiner.flaw_classifier.predict_all(cut[again])  # a cut clip is judged anew
@@ -311,8 +312,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
             report.action, report.action_inferred = int(np.argmax(rec["action"][b])), True
         report.action_name = refiner.action_names[report.action] if refiner.action_names else None
         anchors = anchor_peaks(rec["anchor"][b], _ANCHOR_THRESHOLD)
-        report.anchors = anchors.tolist()
-        report.anchor_probability = [round(float(p), 4) for p in rec["anchor"][b]]
+        report.anchors, report.anchor_probability = anchors.tolist(), [round(float(p), 4) for p in rec["anchor"][b]]
         primary = clf[b] if use_clf else rec["flaw"][b]
         report.flaw_probability = [round(float(p), 4) for p in primary]
         report.anchor_scores = [round(float(1 - rec["flaw"][b][a]), 3) for a in anchors]
@@ -396,5 +396,5 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                 else:
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
-    noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]
-    return filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, clips, noise)  # noise: last
+    noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
+    return filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)

@@ -14,11 +14,13 @@ The best filter depends on the noise level, so :class:`NoiseFilterNet` holds one
 :data:`NOISE_LEVELS` and :class:`NoiseFilter` estimates the level of every frame from how far its
 reference filter (1 cm) moves the frames around it, less the slow part of that move (a wrong pose
 asks for slow corrections, noise for white ones), against the same figure measured on the training
-clips at each level (``level_rms_``). It serves two steps of the learned refiner:
+clips at each level (``level_rms_``). It serves three steps of the learned refiner:
 
 - the typed repair of flagged noise runs (``TYPED_REPAIRS["noise"] = ("noise_filter", 0)``): every frame
   of the run at its own level;
-- a last step (:func:`filtered_noise`) for clips noisy *throughout*, as a generator's texture: a clip
+- the last steps (:func:`filtered_noise`): runs the flaw classifier's noise group finds where its flaw
+  probability stays under its threshold (:func:`noise_run_frames`), in clips not noisy throughout, every
+  frame at its own level (moves capped as below); and clips noisy *throughout*, as a generator's texture: a clip
   whose level in three frames of four passes ``threshold_`` (calibrated on held-out clean clips) has its
   frames denoised at that level, faded in from 0 at a frame level of ``threshold_`` to full at twice
   it, no joint moved further than noise of that level would have moved it (``max_move``: a linear
@@ -234,14 +236,24 @@ class NoiseFilter(NetworkComponent):
         low = (sigma < grid[0])[..., None, None]
         return x + np.where(low, below * c[b, 0, t], (1 - frac) * c[b, hi - 1, t] + frac * c[b, hi, t])
 
-    def denoise(self, joints: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray:
+    def denoise(self, joints: np.ndarray, frames: np.ndarray | None = None, *, capped: bool = False) -> np.ndarray:
         """Every frame of a batch ``(B, T, J, 3)`` metres (or only ``frames (B, T)`` bool) denoised at its own
-        estimated level (for frames known to be noisy); ``(B, T, J, 3)`` float32, other frames exactly as given."""
+        estimated level (for frames known to be noisy), no joint moved further than noise of that level would
+        have moved it where ``capped``; ``(B, T, J, 3)`` float32, other frames exactly as given."""
         x = self._checked(joints)
         levels = self._levels(self._reference(x))
         if frames is not None:
             levels = np.where(np.broadcast_to(np.asarray(frames, bool), levels.shape), levels, 0.0)
-        return self._at_level(x, levels, self._corrections(x)).astype(np.float32)
+        move = self._at_level(x, levels, self._corrections(x)) - x
+        return (x + (self._capped(move, levels) if capped else move)).astype(np.float32)
+
+    def _capped(self, move: np.ndarray, level: np.ndarray) -> np.ndarray:
+        """``move (B, T, J, 3)`` with each joint's step cut to ``max_move`` times what noise of ``level (B, T)``
+        metres per coordinate would move it (unchanged when ``max_move`` is None)."""
+        if self.max_move is None:
+            return move
+        cap = self.max_move * np.sqrt(3.0) * level[..., None]
+        return move * np.minimum(1.0, cap / np.maximum(np.linalg.norm(move, axis=-1), 1e-12))[..., None]
 
     def clip_noise_level(self, joints: np.ndarray) -> np.ndarray:
         """``(B,)`` metres: each clip's level, the ``clip_quantile`` of its frames' estimates (noise *throughout*,
@@ -261,10 +273,7 @@ class NoiseFilter(NetworkComponent):
             given = x[noisy]
             level = np.broadcast_to(levels[noisy, None], frames[noisy].shape).copy()
             weight = np.clip(frames[noisy] / self.threshold_ - 1.0, 0.0, 1.0)[..., None, None]
-            move = self._at_level(given, level, self._corrections(given)) - given
-            if self.max_move is not None:
-                cap = self.max_move * np.sqrt(3.0) * level[..., None]
-                move *= np.minimum(1.0, cap / np.maximum(np.linalg.norm(move, axis=-1), 1e-12))[..., None]
+            move = self._capped(self._at_level(given, level, self._corrections(given)) - given, level)
             x[noisy] = given + weight * move
         return x, levels
 
@@ -289,49 +298,67 @@ def noise_run_frames(probability: np.ndarray) -> np.ndarray:
     return np.isin(grown, np.unique(grown[seeds])) & (grown > 0)
 
 
-def denoised_noise_runs(refiner, clips: np.ndarray, reports: list, given: np.ndarray,
-                        noise_probability: np.ndarray) -> np.ndarray:
-    """In ``clips (B, T, J, 3)``, the frames of the noise runs that the flaw classifier saw in ``given`` (the
-    clips before the repairs; ``noise_probability (B, T)`` its noise-group probability there) and that no
-    repair has changed since, denoised at their own estimated level and put back on the clip's bone lengths."""
-    frames = noise_run_frames(noise_probability) & (clips == given).all(axis=(2, 3))
-    todo = np.flatnonzero(frames.any(1))
+def denoised_noise_runs(refiner, clips: np.ndarray, reports: list, noise_probability: np.ndarray,
+                        repaired: np.ndarray, mode: str = "full") -> np.ndarray:
+    """In ``clips (B, T, J, 3)``, the noise runs (:func:`noise_run_frames`) of the flaw classifier's noise-group
+    probability ``(B, T)`` (on the clips before the repairs) that hold no frame a repair changed (``repaired (B, T)``
+    bool), denoised at their frames' estimated level with capped moves and put back on the clip's bone lengths; a run
+    holding a recognised anchor (the report's) is an anchor step, else a transition step: only those of ``mode``."""
+    keep = np.zeros(clips.shape[:2], bool)
+    for b in np.flatnonzero(noise_run_frames(noise_probability).any(1)):
+        runs, n_runs = label(noise_run_frames(noise_probability[b : b + 1])[0])
+        anchors = np.asarray(reports[b].anchors, int)
+        for r in range(1, n_runs + 1):
+            frames = np.flatnonzero(runs == r)
+            kind = "anchor" if ((anchors >= frames[0]) & (anchors <= frames[-1])).any() else "transition"
+            keep[b, frames] = not repaired[b, frames].any() and mode in ("full", kind)
+    todo = np.flatnonzero(keep.any(1))
     if not todo.size:
         return clips
-    return _put_back(refiner, clips, refiner.noise_filter.denoise(clips[todo], frames[todo]), todo, reports, lambda b, n: (
-        f"{n} frames whose noise-group probability reached {NOISE_PROBABILITY:g} ({NOISE_RUN} frames or more, grown "
-        f"while above {NOISE_LOW:g}; the flaw probability need not pass its threshold) denoised at their estimated level"))
+    denoised = refiner.noise_filter.denoise(clips[todo], keep[todo], capped=True)
+    return _put_back(refiner, clips, denoised, todo, reports, lambda b, n: (
+        f"a noise run ({n} frames changed): the noise-group probability passed {NOISE_PROBABILITY:g} for "
+        f"{NOISE_RUN} frames or more (grown while above {NOISE_LOW:g}; the flaw probability under its threshold); "
+        f"denoised at each frame's estimated level"), per_run=True)
 
 
-def _put_back(refiner, clips: np.ndarray, denoised: np.ndarray, rows, reports: list, reason) -> np.ndarray:
+def _put_back(refiner, clips: np.ndarray, denoised: np.ndarray, rows, reports: list, reason, per_run: bool = False
+              ) -> np.ndarray:
     """``clips (B, T, J, 3)`` with clip ``rows[k]`` taken from ``denoised[k]`` where that changed it, the changed
-    frames put back on the clip's bone lengths and a "noise" change with ``reason(b, n_frames_changed)`` reported."""
+    frames put back on the clip's bone lengths and a "noise" change with ``reason(b, n_frames_changed)`` reported
+    (one per run of changed frames where ``per_run``, else one from the first changed frame to the last)."""
     out = clips.copy()
     for k, b in enumerate(rows):
         changed = (denoised[k] != clips[b]).reshape(clips.shape[1], -1).any(-1)
         if not changed.any():
             continue
         out[b] = project_bone_lengths(denoised[k], reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
-        moved = 100 * float(np.linalg.norm(out[b][changed] - clips[b][changed], axis=-1).mean())
-        reports[b].changes.append({
-            "start": int(np.argmax(changed)), "stop": int(len(changed) - np.argmax(changed[::-1])), "step": "noise",
-            "repair": "noise_filter", "reason": f"{reason(b, int(changed.sum()))} (moved {moved:.2f} cm on average)"})
+        runs, n_runs = label(changed) if per_run else (changed.astype(int), 1)
+        for r in range(1, n_runs + 1):
+            frames = np.flatnonzero(runs == r)
+            moved = 100 * float(np.linalg.norm(out[b][frames] - clips[b][frames], axis=-1).mean())
+            reports[b].changes.append({
+                "start": int(frames[0]), "stop": int(frames[-1] + 1), "step": "noise", "repair": "noise_filter",
+                "reason": f"{reason(b, len(frames))} (moved {moved:.2f} cm on average)"})
     return out
 
 
-def filtered_noise(refiner, clips: np.ndarray, reports: list, given: np.ndarray | None = None,
-                   noise_probability: np.ndarray | None = None) -> np.ndarray:
-    """The refiner's noise steps, last: with ``given`` and ``noise_probability``, the noise runs the flaw
-    classifier saw (:func:`denoised_noise_runs`); then in ``clips (B, T, J, 3)`` that its ``noise_filter`` finds
-    noisy throughout (a generator's texture rather than a flawed run), the noisy frames denoised and put back on
-    the clip's bone lengths, each such clip's change written to its report."""
+def filtered_noise(refiner, clips: np.ndarray, reports: list, noise_probability: np.ndarray | None = None,
+                   repaired: np.ndarray | None = None, mode: str = "full") -> np.ndarray:
+    """The refiner's noise steps, last: in ``clips (B, T, J, 3)`` that its ``noise_filter`` finds noisy throughout
+    (a generator's texture rather than a flawed run), the noisy frames denoised and put back on the clip's bone
+    lengths; in the others, with the classifier's ``noise_probability`` and the frames the repairs changed
+    (``repaired``), the noise runs it saw (:func:`denoised_noise_runs`, ``denoising="filter"`` only). Each
+    change is written to the clip's report."""
     noise_filter, denoising = getattr(refiner, "noise_filter", None), getattr(refiner, "denoising", "filter")
     if noise_filter is None or denoising not in ("filter", "throughout"):
         return clips
-    if given is not None and noise_probability is not None and denoising == "filter":
-        clips = denoised_noise_runs(refiner, clips, reports, given, noise_probability)
     denoised, levels = noise_filter.denoise_clips(clips)
     rows = np.flatnonzero(levels > noise_filter.threshold_)
-    return _put_back(refiner, clips, denoised[rows], rows, reports, lambda b, n: (
+    out = _put_back(refiner, clips, denoised[rows], rows, reports, lambda b, n: (
         f"noisy throughout: estimated noise {100 * float(levels[b]):.2f} cm per coordinate in three frames of four "
         f"(threshold {100 * noise_filter.threshold_:.2f} cm); {n} noisy frames denoised by the learned noise filter"))
+    if noise_probability is None or repaired is None or denoising != "filter":
+        return out
+    calm = levels <= noise_filter.threshold_  # a clip noisy throughout had the step above
+    return denoised_noise_runs(refiner, out, reports, np.where(calm[:, None], noise_probability, 0.0), repaired, mode)
