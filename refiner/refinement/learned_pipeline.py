@@ -15,11 +15,11 @@
    along their own path where they stall (:mod:`refiner.refinement.repair_candidates`), a body that glides or
    floats is corrected by the repair network (:class:`~refiner.refinement.learned_refinement.FlawRepairer`,
    one forward pass for the batch) and moved back over its planted feet
-   (:mod:`refiner.core.contact`), noise is smoothed; all but the re-timing are kept only when the
+   (:mod:`refiner.core.contact`), noise is filtered; root and pose repairs are kept only when the
    flaw classifier finds the result more real (:data:`VERIFY_TYPED`). Only the flagged runs are
    spliced in (displacement zero at the kept frames, smoothstep taper), and changed frames go back
    on the input's bone lengths. A run that contains a recognised anchor is reported as an anchor
-   refinement, the others as transition refinements.
+   refinement, the others as transition refinements. Last, the noise steps (:func:`filtered_noise`).
 """
 from __future__ import annotations
 
