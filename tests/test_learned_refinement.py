@@ -47,6 +47,8 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert again.manifest["learned"]["noise_threshold_m"] == pytest.approx(again.noise_filter.threshold_)
     assert again.amplitude_restorer is not None and 0 < again.amplitude_restorer.gate_ < 1
     assert again.manifest["learned"]["amplitude_gate"] == pytest.approx(again.amplitude_restorer.gate_)
+    assert again.pose_prior is not None and again.pose_prior.hidden == 8 and again.posing == "prior"
+    assert again.manifest["learned"]["pose_prior_threshold_m"] == pytest.approx(again.pose_prior.threshold_)
     assert np.isfinite(again.timing_estimator.threshold_)
     assert again.manifest["learned"]["timing_threshold_frames"] == pytest.approx(again.timing_estimator.threshold_)
     flagged = Refiner.load(out, retiming="flagged")
@@ -71,7 +73,7 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
     parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
     assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer",
-                          "flaw_denoiser", "motion_infiller", "timing_estimator"}
+                          "pose_prior", "flaw_denoiser", "motion_infiller", "timing_estimator"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
 
 

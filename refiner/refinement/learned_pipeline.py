@@ -18,8 +18,8 @@
    (:mod:`refiner.core.contact`), noise is filtered; root and pose repairs are kept only when the
    flaw classifier finds the result more real (:data:`VERIFY_TYPED`). Only the flagged runs are
    spliced in (displacement zero at the kept frames, smoothstep taper), and changed frames go back
-   on the input's bone lengths. A run that contains a recognised anchor is reported as an anchor
-   refinement, the others as transition refinements. Last, the noise steps (:func:`filtered_noise`).
+   on the input's bone lengths. A run that contains a recognised anchor is reported as an anchor refinement, the
+   others as transition refinements. Last, the noise steps (:func:`filtered_noise`) and the pose prior (:func:`prior_posed`).
 """
 from __future__ import annotations
 
@@ -34,6 +34,7 @@ from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
 from refiner.refinement.retrace import cut_retraces
 from refiner.refinement.noise_filter import filtered_noise
+from refiner.refinement.pose_prior import drifting_skeleton, prior_posed
 from refiner.refinement.timing_estimation import estimated_retiming
 from refiner.refinement.report import RefinementReport, start_reports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
@@ -82,8 +83,7 @@ _GROUP_NAMES = tuple(GROUPS)
 #: - noise verified by the classifier repaired nothing: it found every smoothed run of the jittered clips
 #:   *less* real than the noisy one (68 runs; mean flaw probability 0.62 -> 0.76, error 0.96 -> 0.68 cm), so
 #:   noise runs are smoothed unverified where they are :data:`NOISE_RATIO` times noisier than their clip
-#:   (jitter +17.7 -> +22.7 %; the a2m reference generator's FID 4.285 -> 4.286 on 600 samples, 5 % of its
-#:   frames smoothed). A learned judge instead (a temporal convolution trained to estimate each frame's true
+#:   (jitter +17.7 -> +22.7 %; a2m reference generator FID 4.285 -> 4.286, 600 samples, 5 % of frames smoothed). A learned judge instead (a temporal convolution trained to estimate each frame's true
 #:   error after random flaws and random hand-written repairs, 3.5 min) verified noise as well (+21.6 %) but
 #:   refused good re-timings (frozen +30.9 %) and, choosing among all candidates, made time_warp -8.9 %;
 #: - the stall re-timing's window grown over the stall before it and the rush after it
@@ -96,8 +96,7 @@ _GROUP_NAMES = tuple(GROUPS)
 #:   re-timing only where a rush follows the stop (``stall_retime_run(rush=1.5)``): every figure here
 #:   unchanged (its reason lies in the benchmark subjects: a time-warped clip that ends at rest was
 #:   re-timed over its rest, +4.7 cm; time_warp there -1.1 -> -0.4 %).
-#: - noise -> the learned noise filter (:mod:`refiner.refinement.noise_filter`): jitter +22.7 -> +23.0 %;
-#:   with its last step (clips noisy throughout) 22.3 %, **+18.3 %** in all (README, table of choices).
+#: - noise -> the learned noise filter (:mod:`refiner.refinement.noise_filter`): jitter +22.7 -> +23.0 %; with its last step (clips noisy throughout) 22.3 %, **+18.3 %** in all (README).
 TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet", 0), "pose": ("planted_feet", 0),
                  "noise": ("noise_filter", 0)}
 #: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
@@ -278,7 +277,7 @@ def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
 def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
     clips = clips.copy()
-    prior = refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None
+    prior, drifting = (refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None), drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance)
     rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior)
     lengths = ("the clip's median bone lengths" if prior is None else
                "the clip's median bone lengths, drawn toward human proportions where they drift")
@@ -397,4 +396,5 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
     noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
-    return filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
+    out = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
+    return prior_posed(refiner, out, reports, drifting, mode)

@@ -36,7 +36,7 @@ from scipy.ndimage import binary_opening, gaussian_filter1d, label, uniform_filt
 from torch import nn
 
 from refiner.core.skeletons import get_skeleton, rigid_skeleton
-from refiner.core.validation import check_is_fitted, check_random_state
+from refiner.core.validation import check_is_fitted, check_joint_batch, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 
@@ -218,12 +218,7 @@ class NoiseFilter(NetworkComponent):
 
     def _checked(self, joints) -> np.ndarray:
         check_is_fitted(self, "network_", msg=NOT_FITTED)
-        x = np.array(joints, np.float32)
-        if x.ndim != 4 or x.shape[2:] != (self.n_joints_, 3):
-            raise ValueError(f"`joints` must be (B, T, {self.n_joints_}, 3); got shape {x.shape}.")
-        if not np.isfinite(x).all():
-            raise ValueError("`joints` must be finite; got NaN or Inf.")
-        return x
+        return check_joint_batch(joints, self.n_joints_)
 
     def _at_level(self, x: np.ndarray, sigma: np.ndarray, c: np.ndarray) -> np.ndarray:
         """``x (B, T, J, 3)`` plus the bank's corrections ``c (B, L, T, J, 3)`` interpolated at ``sigma (B, T)``

@@ -1,12 +1,11 @@
 """The refiner behind ``refine()`` (paper §3.2): the fitted parts for one skeleton and the steps they run.
 
-:class:`Refiner` holds the parts, checks the input, and runs one of two methods on it: ``"learned"``
-(flaw recognition and repair networks, :mod:`refiner.refinement.learned_pipeline`, the default) or
-``"concepts"`` (anchor scores and transition residuals, with the paper's variants as options,
-:mod:`refiner.refinement.concepts_pipeline`). Do no harm: only flagged frames change, spliced in
-without jumps and put back on the input's bone lengths (:mod:`refiner.refinement.splicing`), but for
-the steps that judge a clip as a whole (stretching bones, damped amplitude, noise throughout) and the
-concept-snap option (off by default), which moves every anchor onto its action's nearest concept.
+:class:`Refiner` holds the parts, checks the input, and runs one of two methods on it: ``"learned"`` (flaw recognition
+and repair networks, :mod:`refiner.refinement.learned_pipeline`, the default) or ``"concepts"`` (anchor scores and
+transition residuals, the paper's variants as options, :mod:`refiner.refinement.concepts_pipeline`). Do no harm: only
+flagged frames change, spliced in without jumps and put back on the input's bone lengths (:mod:`refiner.refinement.splicing`),
+but for the steps that judge a clip as a whole (stretching bones, damped amplitude, noise throughout), the pose prior's
+frames (further off real motion than held-out real clips go) and the concept-snap option (off by default).
 """
 from __future__ import annotations
 
@@ -37,6 +36,7 @@ from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.inputs import MODES, auto_threads, check_choice, check_choices, check_metres, check_metres_each, check_threads, thread_limits
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
+from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.report import RefinementReport
 from refiner.refinement.splicing import project_bone_lengths, splice
 from refiner.refinement.transition_refinement import TransitionRefiner
@@ -60,6 +60,7 @@ _PARTS = {
     "timing_estimator": TimingEstimator,
     "noise_filter": NoiseFilter,
     "amplitude_restorer": AmplitudeRestorer,
+    "pose_prior": PosePrior,
 }
 _NO_DEVICE = ("anchor_concepts", "anchor_quality", "amplitude_restorer")
 #: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
@@ -73,6 +74,8 @@ RETIMING = ("estimated", "flagged", "stalls")
 DENOISING = ("filter", "throughout", "flagged")
 #: Clips that move too little for their action: scaled back (``"restore"``) or kept (``"keep"``).
 AMPLITUDE = ("restore", "keep")
+#: Poses off real motion: corrected by the pose prior, last (``"prior"``), or kept (``"keep"``).
+POSING = ("prior", "keep")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 #: Thresholds a manifest's ``calibration`` entry may hold; they belong to the steps, which save them.
 _CALIBRATED = ("anchor_threshold", "transition_threshold", "transition_thresholds")
@@ -85,15 +88,13 @@ class Refiner:
     Parameters
     ----------
     recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts : fitted parts
-        :class:`AnchorRecognizer`, :class:`AnchorRefiner`, :class:`TransitionGenerator`,
-        :class:`TransitionRefiner`, :class:`AnchorConcepts`.
+        :class:`AnchorRecognizer`, :class:`AnchorRefiner`, :class:`TransitionGenerator`, :class:`TransitionRefiner`, :class:`AnchorConcepts`.
     anchor_quality : AnchorQuality, optional
         Needed for ``quality="pose"`` and ``anchor_method="posterior"``.
     flaw_recognizer, flaw_repairer, flaw_classifier, flaw_denoiser, motion_infiller : optional
         The learned steps (:class:`FlawRecognizer`, :class:`FlawRepairer`, :class:`FlawClassifier`,
         :class:`FlawDenoiser`, :class:`MotionInfiller`; without the in-filler, the network's in-fill stands in).
-    skeleton : str, default="humanact12"
-    action_names : sequence of str
+    skeleton, action_names : str (default "humanact12"), sequence of str
     mode : {"full", "anchor", "transition"}, default="full"
     method : {"learned", "concepts"}, optional
         Default "learned" when ``flaw_recognizer`` and ``flaw_repairer`` are given, else "concepts".
@@ -104,10 +105,11 @@ class Refiner:
         by ``margin=2``, extended while the score stays above ``hysteresis=0.5`` of it; ``change_penalty=0.01``
         is the flaw probability a ``"select"`` candidate must gain per centimetre; a clip whose bone lengths
         vary more than ``rigid_tolerance=0.005`` (std / mean; mocap: under 0.001 %) is put back on rigid bones.
-    timing_estimator, noise_filter, amplitude_restorer : optional
+    timing_estimator, noise_filter, amplitude_restorer, pose_prior : optional
         The learned re-timing step (:mod:`refiner.refinement.timing_estimation`), noise filter
-        (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead) and
-        amplitude step (:mod:`refiner.refinement.amplitude`; ``amplitude="keep"`` skips it).
+        (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead),
+        amplitude step (:mod:`refiner.refinement.amplitude`; ``amplitude="keep"`` skips it) and pose prior
+        (:mod:`refiner.refinement.pose_prior`, last; ``posing="keep"`` skips it).
     retiming : {"estimated", "flagged", "stalls"}, optional
         ``"estimated"`` (default with a ``timing_estimator``): its runs re-timed before detection, then as "flagged":
         flagged retraces cut (:mod:`refiner.refinement.retrace`) and flagged stalls re-timed; ``"stalls"``: stalls only.
@@ -115,13 +117,11 @@ class Refiner:
         ``"filter"`` (default when there is a ``noise_filter``): runs the flaw classifier's noise group finds, then
         clips noisy throughout, are denoised last; ``"throughout"``: the latter only; ``"flagged"``: neither.
     concept_snap : float in [0, 1], default=0
-        The concept-snap option (:mod:`refiner.refinement.concept_snap`): a clip of a given action has its
-        anchors moved this share of the way onto the action's nearest anchor concepts. It trades fidelity
-        for realism (``bench generators``: ``mdm`` FID 1.309 -> 0.780; but every anchor of a real clip moves): off.
+        The concept-snap option (:mod:`refiner.refinement.concept_snap`): a clip of a given action has its anchors moved
+        this share of the way onto the action's nearest anchor concepts; fidelity traded for realism (off).
     rigid_lengths : {"proportions", "median"}, optional
-        The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions
-        the weights learned (``manifest["learned"]["bone_proportions"]``; a drifting bone's median is as
-        wrong as its drift), or the medians alone. Default "proportions" when the weights have them.
+        The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions the weights
+        learned (``manifest["learned"]["bone_proportions"]``), or the medians alone (default: the former, if there).
     quality, anchor_method, transition_method, anchor_noise
         Options of the concepts method, see :mod:`refiner.refinement.concepts_pipeline`: ``quality`` in
         {"pose", "encoder"}, ``anchor_method`` in {"posterior", "concept"}, ``transition_method`` in
@@ -129,10 +129,9 @@ class Refiner:
     blend : int, default=4
         Frames over which a change is tapered in at each kept side.
     threads : int, "auto" or None, default="auto"
-        torch intra-op (and BLAS) threads while refining, restored afterwards. The networks are
-        small: on a 2-core CPU one thread refined a 60-frame clip in 12 ms, torch's default two in 113 ms;
-        a batch of 256 went at 515 clips/s on one thread and 742 on two. ``"auto"``: one thread under
-        :data:`~refiner.refinement.inputs.AUTO_THREADS_BATCH` clips, else the cores up to 4; None: torch's setting.
+        torch intra-op (and BLAS) threads while refining, restored afterwards (2-core CPU: a 60-frame clip took
+        12 ms on one thread, 113 ms on two; a batch of 256 went at 515 and 742 clips/s). ``"auto"``: one thread
+        under :data:`~refiner.refinement.inputs.AUTO_THREADS_BATCH` clips, else the cores up to 4; None: torch's.
     manifest : dict, optional
         Provenance of the weights (dataset, split, licence, hashes) and ``calibration``, the record of
         :meth:`calibrate`. Thresholds found there (``anchor_threshold``; ``transition_thresholds`` or
@@ -148,11 +147,11 @@ class Refiner:
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
                  anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None,
                  flaw_denoiser=None, motion_infiller=None, timing_estimator=None, noise_filter=None,
-                 amplitude_restorer=None, *,
+                 amplitude_restorer=None, pose_prior=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, retiming: str | None = None,
-                 denoising: str | None = None, amplitude: str = "restore", concept_snap: float = 0.0,
+                 denoising: str | None = None, amplitude: str = "restore", posing: str = "prior", concept_snap: float = 0.0,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | str | None = "auto", manifest: dict | None = None):
@@ -160,8 +159,8 @@ class Refiner:
         self.transition_generator, self.transition_refiner = transition_generator, transition_refiner
         self.flaw_recognizer, self.flaw_repairer, self.flaw_classifier = flaw_recognizer, flaw_repairer, flaw_classifier
         self.flaw_denoiser, self.motion_infiller, self.timing_estimator = flaw_denoiser, motion_infiller, timing_estimator
-        self.noise_filter, self.amplitude_restorer = noise_filter, amplitude_restorer
-        self.amplitude = check_choice("amplitude", amplitude, AMPLITUDE)
+        self.noise_filter, self.amplitude_restorer, self.pose_prior = noise_filter, amplitude_restorer, pose_prior
+        self.amplitude, self.posing = check_choice("amplitude", amplitude, AMPLITUDE), check_choice("posing", posing, POSING)
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
         self.concept_snap = check_strength(concept_snap)

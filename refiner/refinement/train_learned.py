@@ -24,10 +24,11 @@ from refiner.refinement.amplitude import AmplitudeRestorer
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
+from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.timing_estimation import TimingEstimator
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
-           "calibrate_learned", "calibration_split", "CLIP_RATE", "bone_proportion_records", "CONVERTED_SKELETONS",
+           "calibrate_learned", "calibration_split", "CLIP_RATE", "POSE_QUANTILE", "bone_proportion_records", "CONVERTED_SKELETONS",
            "fit_anchor_concepts"]
 
 #: Share of held-out real clips the timing estimator may re-time: it changes frames unverified, before
@@ -55,7 +56,13 @@ CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
 #: one CPU core) and the motion in-filler (about 40), and their tiny test version.
 CORRECTION_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
-LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer")
+LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer", "pose_prior")
+#: The pose prior's settings (about 13 minutes on one CPU core) and its tiny test version.
+POSE_PRIOR_CONFIGS = {"default": dict(schedule=dict()),
+                      "tiny": dict(hidden=8, n_layers=1, crop=16, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
+#: The pose prior corrects frames of drifting skeletons where it would move them further than this quantile of its
+#: corrections of held-out clean frames (people it never saw).
+POSE_QUANTILE = 0.5
 #: Share of held-out clean clips the amplitude step may scale: it changes whole clips.
 AMPLITUDE_CLIP_RATE = 0.005
 #: The noise filter's settings (fitted in closed form: about a minute on one CPU core) and its tiny test version.
@@ -69,9 +76,9 @@ TIMING_CONFIGS = {"default": dict(schedule=dict()),
                   "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
             "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator,
-            "noise_filter": NoiseFilter, "amplitude_restorer": AmplitudeRestorer}
+            "noise_filter": NoiseFilter, "amplitude_restorer": AmplitudeRestorer, "pose_prior": PosePrior}
 _CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": CORRECTION_CONFIGS, "motion_infiller": CORRECTION_CONFIGS,
-            "timing_estimator": TIMING_CONFIGS}
+            "timing_estimator": TIMING_CONFIGS, "pose_prior": POSE_PRIOR_CONFIGS}
 
 
 def calibration_split(subjects) -> np.ndarray:
@@ -136,7 +143,7 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         cfg = dict(_CONFIGS.get(name, LEARNED_CONFIGS)[config])
         schedule = replace(cls().schedule, **cfg.pop("schedule"), **run)
         est = cls(**cfg, schedule=schedule, random_state=random_state)
-        if name in ("flaw_classifier", "flaw_denoiser", "motion_infiller", "timing_estimator"):  # action-agnostic
+        if name in ("flaw_classifier", "flaw_denoiser", "motion_infiller", "timing_estimator", "pose_prior"):  # action-agnostic
             est.fit(pick(fit_idx)[0], skeleton=skeleton, validation=pick(cal_idx)[0],
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         elif name == "flaw_recognizer":
@@ -172,6 +179,7 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.timing_estimator = parts.get("timing_estimator")
     refiner.noise_filter = parts.get("noise_filter")
     refiner.amplitude_restorer = parts.get("amplitude_restorer")
+    refiner.pose_prior = parts.get("pose_prior")
     refiner.denoising = "filter" if refiner.noise_filter is not None else "flagged"
     refiner.retiming = "estimated" if refiner.timing_estimator is not None else "flagged"
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
@@ -183,6 +191,8 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
                                       if parts.get("timing_estimator") is not None else {}),
                                    **({"noise_threshold_m": float(parts["noise_filter"].threshold_)}
                                       if parts.get("noise_filter") is not None else {}),
+                                   **({"pose_prior_threshold_m": float(parts["pose_prior"].threshold_)}
+                                      if parts.get("pose_prior") is not None else {}),
                                    **({"amplitude_gate": parts["amplitude_restorer"].gate_,
                                        "amplitude_target": parts["amplitude_restorer"].target_}
                                       if parts.get("amplitude_restorer") is not None else {})}
@@ -246,6 +256,8 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
                if "timing_estimator" in parts else {}),
             **({"noise_threshold_m": parts["noise_filter"].calibrate(clips, clip_rate=clip_rate)}
                if "noise_filter" in parts else {}),
+            **({"pose_prior_threshold_m": parts["pose_prior"].calibrate(clips, quantile=POSE_QUANTILE)}
+               if "pose_prior" in parts else {}),
             **(dict(zip(("amplitude_gate", "amplitude_target"), parts["amplitude_restorer"].calibrate(
                 clips, actions, clip_rate=AMPLITUDE_CLIP_RATE))) if "amplitude_restorer" in parts else {}),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}

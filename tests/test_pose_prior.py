@@ -1,0 +1,143 @@
+"""The pose prior: turns with the body, leaves frames under its threshold exactly as given, refuses bad input,
+survives saving, and, shipped, takes drifted joints of held-out subjects back toward real poses while leaving
+clean clips alone; as the refiner's last step it reports what it changed and keeps to the mode."""
+import copy
+
+import numpy as np
+import pytest
+import torch
+
+from refiner.core.validation import NotFittedError
+from refiner.evaluation.flaws import corrupt
+from refiner.nn.training import TrainSchedule
+from refiner.refinement.pipeline import Refiner
+from refiner.refinement.pose_prior import PosePrior, body_frame, drifting_skeleton
+
+TINY = TrainSchedule(n_epochs=1, steps_per_epoch=2, batch_size=4, device="cpu")
+
+
+def _error(y, x):
+    return float(np.linalg.norm(np.asarray(y, np.float64) - x, axis=-1).mean())
+
+
+def _turned(x, angle):
+    """``x (..., J, 3)`` turned by ``angle`` about HumanAct12's up axis (y)."""
+    c, s = np.cos(angle), np.sin(angle)
+    rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], np.float32)
+    return x @ rot.T
+
+
+@pytest.fixture(scope="module")
+def tiny(humanact12):
+    clips = [m.joints for m in humanact12.motions[:40]]
+    return PosePrior(hidden=16, n_layers=1, crop=16, schedule=TINY).fit(clips), clips
+
+
+@pytest.mark.real_data
+def test_correction_turns_with_the_body(tiny):
+    prior, clips = tiny
+    x = clips[0][None, :30]
+    turned = prior.correction(_turned(x, 1.1))
+    np.testing.assert_allclose(turned, _turned(prior.correction(x), 1.1), atol=1e-5)
+    centre, axes = body_frame(torch.from_numpy(_turned(x, -0.4)), "humanact12")
+    assert centre.shape == (1, 30, 1, 3) and axes.shape == (1, 30, 3, 3)
+    np.testing.assert_allclose(torch.einsum("btij,btkj->btik", axes, axes).numpy(), np.broadcast_to(np.eye(3), (1, 30, 3, 3)),
+                               atol=1e-6)  # orthonormal rows
+
+
+@pytest.mark.real_data
+def test_threshold_gates_every_frame_and_saving_keeps_it(tiny, tmp_path):
+    prior, clips = tiny
+    x = clips[1][None, :40].copy()
+    given = x.copy()
+    assert np.isinf(prior.threshold_)  # uncalibrated: changes nothing
+    out, level = prior.posed(x)
+    assert np.array_equal(out, x) and level.shape == (1, 40) and (level > 0).all()
+    prior = copy.deepcopy(prior)
+    prior.threshold_ = float(np.median(level))
+    out, level = prior.posed(x)
+    under = level[0] <= prior.threshold_
+    assert under.any() and (~under).any()
+    assert np.array_equal(out[0, under], x[0, under]) and not np.array_equal(out[0, ~under], x[0, ~under])
+    full = level[0] >= prior.fade * prior.threshold_
+    np.testing.assert_allclose(out[0, full], (x + prior.correction(x))[0, full], atol=1e-6)
+    assert np.array_equal(x, given)  # the input is not modified
+    prior.save(tmp_path / "p.safetensors")
+    back = PosePrior.load(tmp_path / "p.safetensors")
+    assert back.threshold_ == prior.threshold_
+    np.testing.assert_allclose(back.correction(x), prior.correction(x), atol=1e-6)
+    threshold = prior.calibrate(clips[:20], quantile=0.25)
+    levels = np.concatenate([prior.level(c[None])[0] for c in clips[:20]])
+    assert abs(np.mean(levels > threshold) - 0.75) < 0.01
+
+
+def test_drifting_skeleton_tells_slow_deformation_from_noise_and_one_bone(tiny_clip, rng):
+    """The step's gate: every bone deforming slowly passes; white noise, rigid bones and one stretching bone do not."""
+    x = np.repeat(tiny_clip[:1], 60, axis=0) + np.linspace(0, 0.3, 60)[:, None, None]  # a rigid body gliding
+    t = np.linspace(0, 1, 60)[:, None, None]
+    drift = x + t * rng.normal(size=(1, 24, 3)) * 0.06  # every joint on its own straight line
+    noisy = x + rng.normal(size=x.shape) * 0.02
+    one = x.copy()
+    one[:, 22] += t[..., 0] * np.array([0.08, 0.0, 0.0])  # a hand drifting alone: one bone stretches
+    gate = drifting_skeleton(np.stack([x, drift, noisy, one]), "humanact12")
+    assert gate.tolist() == [False, True, False, False]
+    with pytest.raises(ValueError, match="B, T, J, 3"):
+        drifting_skeleton(drift, "humanact12")
+
+
+def test_refuses_bad_input_and_unfitted_use(tiny):
+    with pytest.raises(NotFittedError):
+        PosePrior().correction(np.zeros((1, 10, 24, 3)))
+    prior, _ = tiny
+    with pytest.raises(ValueError, match="must be \\(B, T, 24, 3\\)"):
+        prior.correction(np.zeros((10, 24, 3)))
+    bad = np.zeros((1, 10, 24, 3))
+    bad[0, 3, 2, 1] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        prior.posed(bad)
+    with pytest.raises(ValueError, match="clips"):
+        PosePrior(schedule=TINY).fit([np.zeros((1, 24, 3))])
+    with pytest.raises(ValueError, match="clean_probability"):
+        PosePrior(clean_probability=1.0, schedule=TINY).fit([np.zeros((20, 24, 3))])
+    with pytest.raises(ValueError, match="quantile"):
+        prior.calibrate([np.zeros((20, 24, 3))], quantile=1.0)
+
+
+@pytest.mark.real_data
+def test_shipped_prior_pulls_drifted_joints_back_and_leaves_clean_clips(humanact12):
+    """Subjects 11-12 (never seen by the train-split weights): the step's gate passes drifting clips and no clean
+    one, the prior takes drifting joints nearer the clean clip, and the refiner gains by the step."""
+    model = Refiner.pretrained("humanact12", split="train")
+    kept = Refiner.pretrained("humanact12", split="train", posing="keep")
+    prior = model.pose_prior
+    assert prior is not None and 0 < prior.threshold_ < 0.02
+    clips = [m for m in humanact12.split("test").motions if len(m.joints) >= 60][::8][:12]
+    bad = [corrupt(m, "anchor_drift", 2, random_state=i).motion.joints for i, m in enumerate(clips)]
+    assert not drifting_skeleton(np.stack([m.joints[:60] for m in clips]), "humanact12").any()
+    assert drifting_skeleton(np.stack([b[:60] for b in bad]), "humanact12").mean() > 0.8
+    errors = {"flawed": [], "prior": [], "refined": [], "kept": []}
+    for m, b in zip(clips, bad):
+        x = m.joints.astype(np.float64)
+        errors["flawed"].append(_error(b, x)), errors["prior"].append(_error(prior.posed(b[None])[0][0], x))
+        errors["refined"].append(_error(model.refine(b, action=m.action), x))
+        errors["kept"].append(_error(kept.refine(b, action=m.action), x))
+        assert np.array_equal(model.refine(m.joints, action=m.action), kept.refine(m.joints, action=m.action))
+    mean = {k: float(np.mean(v)) for k, v in errors.items()}
+    assert mean["prior"] < 0.85 * mean["flawed"] and mean["refined"] < 0.85 * mean["kept"], mean
+
+
+@pytest.mark.real_data
+def test_refiner_step_reports_and_keeps_to_the_mode(humanact12):
+    model = Refiner.pretrained("humanact12", split="train")
+    m = next(c for c in humanact12.split("test").motions if len(c.joints) >= 60)
+    bad = corrupt(m, "anchor_drift", 3, random_state=3).motion
+    out, report = model.refine(bad, action=m.action, return_report=True)
+    steps = [c for c in report.changes if c.get("repair") == "pose_prior"]
+    assert steps and all("pose prior" in c["reason"] and c["step"] in ("anchor", "transition") for c in steps)
+    kept = Refiner.pretrained("humanact12", split="train", posing="keep").refine(bad, action=m.action)
+    assert not np.array_equal(out.joints, kept.joints)
+    for mode in ("anchor", "transition"):
+        _, r = model.refine(bad, action=m.action, mode=mode, return_report=True)
+        assert all(c["step"] == mode for c in r.changes if c.get("repair") == "pose_prior")
+    with pytest.raises(ValueError, match="posing"):
+        Refiner.pretrained("humanact12", split="train", posing="snap")
