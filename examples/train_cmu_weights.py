@@ -9,6 +9,7 @@ parallel processes, then ``assemble``; ``SPLIT`` is ``train``, the default, for 
     python examples/train_cmu_weights.py OUT flaw_repairer [SPLIT]
     python examples/train_cmu_weights.py OUT noise_filter [SPLIT]          # closed form, about a minute
     python examples/train_cmu_weights.py OUT amplitude_restorer [SPLIT]    # medians, seconds (not shipped)
+    python examples/train_cmu_weights.py OUT pose_prior [SPLIT]            # about 8 minutes
     python examples/train_cmu_weights.py OUT assemble [SPLIT] [FOLDER]     # default FOLDER: OUT/refiner
 
 Split ``all`` is not shipped: calibrated on its two highest-numbered subjects (133, 136; 59 clips) it
@@ -73,7 +74,7 @@ elif stage == "assemble":
     manifest = {"dataset": "cmu_mocap", "split": split, "config": "default (flaw recogniser: 10 epochs)",
                 "clips": len(train), "subjects": sorted(set(int(s) for s in train.subjects)), "licence": CMU_LICENCE,
                 "command": f"python examples/train_cmu_weights.py OUT {{flaw_classifier,flaw_recognizer,flaw_repairer,"
-                           f"noise_filter,amplitude_restorer,assemble}} {split}",
+                           f"noise_filter,amplitude_restorer,pose_prior,assemble}} {split}",
                 "notes": ["learned steps only: method='concepts' (the paper's parts) is not available for these weights",
                           f"training clips of at least {MIN_FRAMES} frames", held_out,
                           f"networks on every subject but {calibration}, thresholds on those",
@@ -92,7 +93,7 @@ elif stage == "assemble":
     if any(not np.allclose(c, tokens[a, : len(c)], atol=1e-5) for a, c in enumerate(concepts.centers_)):
         raise SystemExit("the anchor concepts differ from the repair network's; delete parts/anchor_concepts.safetensors")
     model = Refiner(None, None, None, None, concepts, None, parts["flaw_recognizer"], parts["flaw_repairer"],
-                    parts["flaw_classifier"], noise_filter=parts["noise_filter"],
+                    parts["flaw_classifier"], noise_filter=parts["noise_filter"], pose_prior=parts.get("pose_prior"),
                     amplitude_restorer=None, skeleton="cmu_mocap",  # see AMPLITUDE_NOTE
                     action_names=CMU_ACTIONS, manifest=manifest)
     folder = Path(sys.argv[4]) if len(sys.argv) > 4 else out / "refiner"

@@ -141,3 +141,23 @@ def test_refiner_step_reports_and_keeps_to_the_mode(humanact12):
         assert all(c["step"] == mode for c in r.changes if c.get("repair") == "pose_prior")
     with pytest.raises(ValueError, match="posing"):
         Refiner.pretrained("humanact12", split="train", posing="snap")
+
+
+@pytest.mark.real_data
+def test_converted_skeletons_get_the_step_on_their_own_bones(humanact12):
+    """A uestc clip is judged on its own (rigid) bones, refined through HumanAct12's prior, and comes back nearer."""
+    from refiner.core.skeletons import convert
+
+    model = Refiner.pretrained("uestc", split="train")
+    kept = Refiner.pretrained("uestc", split="train", posing="keep")
+    clips = [m for m in humanact12.split("test").motions if len(m.joints) >= 60][::10][:6]
+    clean = np.stack([convert(m.joints[:60], "humanact12", "uestc") for m in clips])
+    bad = np.stack([convert(corrupt(m, "anchor_drift", 2, random_state=i).motion.joints[:60], "humanact12", "uestc")
+                    for i, m in enumerate(clips)])
+    out, reports = model.refine(bad, return_report=True)
+    assert sum(any(c.get("repair") == "pose_prior" for c in r.changes) for r in reports) >= 4
+    assert _error(out, clean) < _error(kept.refine(bad), clean)
+    assert np.array_equal(model.refine(clean), kept.refine(clean))
+    mask = np.ones(len(model.rigid_bones), bool)
+    mask[:] = False
+    assert not drifting_skeleton(bad, "uestc", bones=mask).any()  # no bone judged: nothing drifts

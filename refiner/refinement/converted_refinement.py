@@ -20,6 +20,7 @@ from refiner.core.skeleton_conversion import convert, estimated_joints
 from refiner.core.skeletons import BoneProportions, get_skeleton, rigid_skeleton
 from refiner.core.validation import check_joints
 from refiner.refinement.inputs import MIN_FRAMES, check_metres_each, thread_limits
+from refiner.refinement.pose_prior import drifting_skeleton, prior_posed
 
 __all__ = ["ConvertedRefiner", "FLEXIBLE_BONES", "converts_with_humanact12"]
 
@@ -133,6 +134,10 @@ class ConvertedRefiner:
         else:
             one, report = self.base.refine(inner[0], action=known[0], mode=mode, return_report=True)
             refined, reports = one[None], [report]
+        # the pose prior's gate reads this clip's own bones (the base's rigid step is off: tolerance inf)
+        drifting = (drifting_skeleton(clips, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
+                    else np.zeros(len(clips), bool))
+        refined = prior_posed(self.base, refined, reports, drifting, mode or self.base.mode)
         changed = ~(refined == inner).reshape(*refined.shape[:2], -1).all(-1)  # (B, T)
         delta = convert(refined, self.base.skeleton, self.skeleton) - convert(inner, self.base.skeleton, self.skeleton)
         out = given.copy()

@@ -256,7 +256,8 @@ def _loss(net, batch, rng) -> torch.Tensor:
     return ((batch["flawed"] + net(batch["flawed"]) - batch["clean"]) ** 2).sum(-1).mean()
 
 
-def drifting_skeleton(joints: np.ndarray, skeleton: str, tolerance: float = 0.005) -> np.ndarray:
+def drifting_skeleton(joints: np.ndarray, skeleton: str, tolerance: float = 0.005, *, bones: np.ndarray | None = None
+                      ) -> np.ndarray:
     """``(B,)`` bool: clips ``(B, T, J, 3)`` metres whose skeleton deforms slowly throughout, as drifting joints make it.
 
     A bone's length varies by more than ``tolerance`` (std / mean, the rigid-skeleton step's test), and the
@@ -264,11 +265,16 @@ def drifting_skeleton(joints: np.ndarray, skeleton: str, tolerance: float = 0.00
     at least :data:`DRIFT_AUTOCORRELATION`) and are off their median by :data:`DRIFT_OFF` in at least
     :data:`DRIFT_SHARE` of the frames: noise varies from frame to frame, a wrong pose blended over one transition
     shortens bones in part of the clip only (calibration subjects 9-10, severity 2: of the seeded clips 100 % of
-    drift, 0 % of jitter, 10 % of wrong anchors pass; no clean clip, whose bones are rigid)."""
+    drift, 0 % of jitter, 10 % of wrong anchors pass; no clean clip, whose bones are rigid). ``bones``: boolean mask
+    of the bones judged (default all; as :func:`~refiner.core.skeletons.rigid_skeleton`'s)."""
     x = np.asarray(joints, np.float64)
     if x.ndim != 4 or x.shape[-1] != 3:
         raise ValueError(f"`joints` must be (B, T, J, 3); got shape {x.shape}.")
     lengths = bone_lengths(x, skeleton)  # (B, T, n_bones)
+    if bones is not None:
+        lengths = lengths[..., np.asarray(bones, bool)]
+    if lengths.shape[-1] == 0 or x.shape[1] < 2:  # no bone judged, or no motion: nothing drifts
+        return np.zeros(len(x), bool)
     variation = lengths.std(1) / np.maximum(lengths.mean(1), 1e-9)
     dev = lengths - np.median(lengths, axis=1, keepdims=True)
     rho = (dev[:, 1:] * dev[:, :-1]).sum(1) / np.maximum((dev * dev).sum(1), 1e-18)
