@@ -49,6 +49,8 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert again.manifest["learned"]["amplitude_gate"] == pytest.approx(again.amplitude_restorer.gate_)
     assert again.pose_prior is not None and again.pose_prior.hidden == 8 and again.posing == "prior"
     assert again.manifest["learned"]["pose_prior_threshold_m"] == pytest.approx(again.pose_prior.threshold_)
+    assert again.pose_prior.texture_threshold_ >= again.pose_prior.threshold_  # the 95th percentile, the median
+    assert again.manifest["learned"]["pose_prior_texture_threshold_m"] == pytest.approx(again.pose_prior.texture_threshold_)
     assert np.isfinite(again.timing_estimator.threshold_)
     assert again.manifest["learned"]["timing_threshold_frames"] == pytest.approx(again.timing_estimator.threshold_)
     flagged = Refiner.load(out, retiming="flagged")

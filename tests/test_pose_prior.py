@@ -66,9 +66,12 @@ def test_threshold_gates_every_frame_and_saving_keeps_it(tiny, tmp_path):
     back = PosePrior.load(tmp_path / "p.safetensors")
     assert back.threshold_ == prior.threshold_
     np.testing.assert_allclose(back.correction(x), prior.correction(x), atol=1e-6)
-    threshold = prior.calibrate(clips[:20], quantile=0.25)
+    threshold, texture = prior.calibrate(clips[:20], quantile=0.25, texture_quantile=0.9)
     levels = np.concatenate([prior.level(c[None])[0] for c in clips[:20]])
-    assert abs(np.mean(levels > threshold) - 0.75) < 0.01
+    assert abs(np.mean(levels > threshold) - 0.75) < 0.01 and abs(np.mean(levels > texture) - 0.1) < 0.01
+    two = np.stack([x[0], x[0]])
+    out, level = prior.posed(two, np.array([threshold, np.inf]))  # one threshold per clip
+    assert not np.array_equal(out[0], two[0]) and np.array_equal(out[1], two[1])
 
 
 def test_drifting_skeleton_tells_slow_deformation_from_noise_and_one_bone(tiny_clip, rng):
@@ -101,6 +104,8 @@ def test_refuses_bad_input_and_unfitted_use(tiny):
         PosePrior(clean_probability=1.0, schedule=TINY).fit([np.zeros((20, 24, 3))])
     with pytest.raises(ValueError, match="quantile"):
         prior.calibrate([np.zeros((20, 24, 3))], quantile=1.0)
+    with pytest.raises(ValueError, match="quantile"):
+        prior.calibrate([np.zeros((20, 24, 3))], texture_quantile=0.0)
 
 
 @pytest.mark.real_data
@@ -161,3 +166,25 @@ def test_converted_skeletons_get_the_step_on_their_own_bones(humanact12):
     mask = np.ones(len(model.rigid_bones), bool)
     mask[:] = False
     assert not drifting_skeleton(bad, "uestc", bones=mask).any()  # no bone judged: nothing drifts
+
+
+@pytest.mark.real_data
+def test_clips_noisy_throughout_get_the_texture_threshold():
+    """A generator's texture (the a2m reference generator jitters on every frame, its bones rigid) is corrected past
+    the higher threshold only, and the noise step says which clips are noisy throughout."""
+    from refiner.reference import load_reference_generator
+    from refiner.refinement.noise_filter import filtered_noise
+
+    model = Refiner.pretrained("humanact12", split="train")
+    prior = model.pose_prior
+    assert prior.texture_threshold_ > prior.threshold_
+    clips = np.stack([m.joints for m in load_reference_generator("a2m").sample_motions(1, 6, random_state=3)])
+    assert not drifting_skeleton(clips, "humanact12").any()
+    _, noisy = filtered_noise(model, clips, [type("R", (), {"changes": []})() for _ in clips])
+    assert noisy.sum() >= 3
+    out, reports = model.refine(clips, action=[1] * len(clips), return_report=True)
+    steps = [c for r in reports for c in r.changes if c.get("repair") == "pose_prior"]
+    assert steps and all("noisy throughout" in c["reason"] and f"{100 * prior.texture_threshold_:.2f} cm" in c["reason"]
+                         for c in steps)
+    kept = Refiner.pretrained("humanact12", split="train", posing="keep").refine(clips, action=[1] * len(clips))
+    assert not np.array_equal(out, kept)

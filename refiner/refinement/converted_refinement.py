@@ -134,9 +134,11 @@ class ConvertedRefiner:
         else:
             one, report = self.base.refine(inner[0], action=known[0], mode=mode, return_report=True)
             refined, reports = one[None], [report]
-        # the pose prior's gate reads this clip's own bones (the base's rigid step is off: tolerance inf)
+        # the pose prior's drift gate reads this clip's own bones (the base's rigid step is off: tolerance inf);
+        # a clip the base already corrected (noisy throughout) is not corrected twice
         drifting = (drifting_skeleton(clips, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
                     else np.zeros(len(clips), bool))
+        drifting &= [not any(c.get("repair") == "pose_prior" for c in r.changes) for r in reports]
         refined = prior_posed(self.base, refined, reports, drifting, mode or self.base.mode)
         changed = ~(refined == inner).reshape(*refined.shape[:2], -1).all(-1)  # (B, T)
         delta = convert(refined, self.base.skeleton, self.skeleton) - convert(inner, self.base.skeleton, self.skeleton)

@@ -339,21 +339,21 @@ def _put_back(refiner, clips: np.ndarray, denoised: np.ndarray, rows, reports: l
 
 
 def filtered_noise(refiner, clips: np.ndarray, reports: list, noise_probability: np.ndarray | None = None,
-                   repaired: np.ndarray | None = None, mode: str = "full") -> np.ndarray:
+                   repaired: np.ndarray | None = None, mode: str = "full") -> tuple[np.ndarray, np.ndarray]:
     """The refiner's noise steps, last: in ``clips (B, T, J, 3)`` that its ``noise_filter`` finds noisy throughout
     (a generator's texture rather than a flawed run), the noisy frames denoised and put back on the clip's bone
     lengths; in the others, with the classifier's ``noise_probability`` and the frames the repairs changed
     (``repaired``), the noise runs it saw (:func:`denoised_noise_runs`, ``denoising="filter"`` only). Each
-    change is written to the clip's report."""
+    change is written to the clip's report. Returns ``(clips, noisy throughout (B,) bool)``."""
     noise_filter, denoising = getattr(refiner, "noise_filter", None), getattr(refiner, "denoising", "filter")
     if noise_filter is None or denoising not in ("filter", "throughout"):
-        return clips
+        return clips, np.zeros(len(clips), bool)
     denoised, levels = noise_filter.denoise_clips(clips)
     rows = np.flatnonzero(levels > noise_filter.threshold_)
     out = _put_back(refiner, clips, denoised[rows], rows, reports, lambda b, n: (
         f"noisy throughout: estimated noise {100 * float(levels[b]):.2f} cm per coordinate in three frames of four "
         f"(threshold {100 * noise_filter.threshold_:.2f} cm); {n} noisy frames denoised by the learned noise filter"))
-    if noise_probability is None or repaired is None or denoising != "filter":
-        return out
     calm = levels <= noise_filter.threshold_  # a clip noisy throughout had the step above
-    return denoised_noise_runs(refiner, out, reports, np.where(calm[:, None], noise_probability, 0.0), repaired, mode)
+    if noise_probability is None or repaired is None or denoising != "filter":
+        return out, ~calm
+    return denoised_noise_runs(refiner, out, reports, np.where(calm[:, None], noise_probability, 0.0), repaired, mode), ~calm

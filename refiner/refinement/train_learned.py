@@ -28,7 +28,7 @@ from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.timing_estimation import TimingEstimator
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
-           "calibrate_learned", "calibration_split", "CLIP_RATE", "POSE_QUANTILE", "bone_proportion_records", "CONVERTED_SKELETONS",
+           "calibrate_learned", "calibration_split", "CLIP_RATE", "POSE_QUANTILE", "POSE_TEXTURE_QUANTILE", "bone_proportion_records", "CONVERTED_SKELETONS",
            "fit_anchor_concepts"]
 
 #: Share of held-out real clips the timing estimator may re-time: it changes frames unverified, before
@@ -61,8 +61,8 @@ LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_f
 POSE_PRIOR_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, crop=16, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 #: The pose prior corrects frames of drifting skeletons where it would move them further than this quantile of its
-#: corrections of held-out clean frames (people it never saw).
-POSE_QUANTILE = 0.5
+#: corrections of held-out clean frames (people it never saw), frames of clips noisy throughout beyond the second.
+POSE_QUANTILE, POSE_TEXTURE_QUANTILE = 0.5, 0.95
 #: Share of held-out clean clips the amplitude step may scale: it changes whole clips.
 AMPLITUDE_CLIP_RATE = 0.005
 #: The noise filter's settings (fitted in closed form: about a minute on one CPU core) and its tiny test version.
@@ -191,7 +191,8 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
                                       if parts.get("timing_estimator") is not None else {}),
                                    **({"noise_threshold_m": float(parts["noise_filter"].threshold_)}
                                       if parts.get("noise_filter") is not None else {}),
-                                   **({"pose_prior_threshold_m": float(parts["pose_prior"].threshold_)}
+                                   **({"pose_prior_threshold_m": float(parts["pose_prior"].threshold_),
+                                       "pose_prior_texture_threshold_m": float(parts["pose_prior"].texture_threshold_)}
                                       if parts.get("pose_prior") is not None else {}),
                                    **({"amplitude_gate": parts["amplitude_restorer"].gate_,
                                        "amplitude_target": parts["amplitude_restorer"].target_}
@@ -256,8 +257,8 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
                if "timing_estimator" in parts else {}),
             **({"noise_threshold_m": parts["noise_filter"].calibrate(clips, clip_rate=clip_rate)}
                if "noise_filter" in parts else {}),
-            **({"pose_prior_threshold_m": parts["pose_prior"].calibrate(clips, quantile=POSE_QUANTILE)}
-               if "pose_prior" in parts else {}),
+            **(dict(zip(("pose_prior_threshold_m", "pose_prior_texture_threshold_m"), parts["pose_prior"].calibrate(
+                clips, quantile=POSE_QUANTILE, texture_quantile=POSE_TEXTURE_QUANTILE))) if "pose_prior" in parts else {}),
             **(dict(zip(("amplitude_gate", "amplitude_target"), parts["amplitude_restorer"].calibrate(
                 clips, actions, clip_rate=AMPLITUDE_CLIP_RATE))) if "amplitude_restorer" in parts else {}),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}
