@@ -93,9 +93,8 @@ _GROUP_NAMES = tuple(GROUPS)
 #:   segmentation anchors instead: 42.6 / 40.4 %; **+16.6 %** in all.
 #: - the rigid skeleton on bone lengths drawn toward learned proportions (``Refiner(rigid_lengths=)``):
 #:   anchor_drift -0.9 -> +12.6 %, wrong_anchor -2.1 -> -1.7 %, **+18.6 %** in all; then the stall
-#:   re-timing only where a rush follows the stop (``stall_retime_run(rush=1.5)``): every figure here
-#:   unchanged (its reason lies in the benchmark subjects: a time-warped clip that ends at rest was
-#:   re-timed over its rest, +4.7 cm; time_warp there -1.1 -> -0.4 %).
+#:   re-timing only where a rush follows the stop (``stall_retime_run(rush=1.5)``): every figure here unchanged (its
+#:   reason lies in the benchmark subjects: a time-warped clip ending at rest was re-timed over it, +4.7 cm; -1.1 -> -0.4 %).
 #: - noise -> the learned noise filter (:mod:`refiner.refinement.noise_filter`): jitter +22.7 -> +23.0 %; with its last step (clips noisy throughout) 22.3 %, **+18.3 %** in all (README).
 TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet", 0), "pose": ("planted_feet", 0),
                  "noise": ("noise_filter", 0)}
@@ -277,8 +276,9 @@ def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
 def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
     clips = clips.copy()
-    prior, drifting = (refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None), drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance)
+    prior = refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None
     rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior)
+    drifting = drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, variation=variations)  # the input's bones
     lengths = ("the clip's median bone lengths" if prior is None else
                "the clip's median bone lengths, drawn toward human proportions where they drift")
     for b, (report, variation) in enumerate(zip(reports, variations)):  # first the bones: not a motion flaw

@@ -264,8 +264,8 @@ def _loss(net, batch, rng) -> torch.Tensor:
     return ((batch["flawed"] + net(batch["flawed"]) - batch["clean"]) ** 2).sum(-1).mean()
 
 
-def drifting_skeleton(joints: np.ndarray, skeleton: str, tolerance: float = 0.005, *, bones: np.ndarray | None = None
-                      ) -> np.ndarray:
+def drifting_skeleton(joints: np.ndarray, skeleton: str, tolerance: float = 0.005, *, bones: np.ndarray | None = None,
+                      variation: np.ndarray | None = None) -> np.ndarray:
     """``(B,)`` bool: clips ``(B, T, J, 3)`` metres whose skeleton deforms slowly throughout, as drifting joints make it.
 
     A bone's length varies by more than ``tolerance`` (std / mean, the rigid-skeleton step's test), and the
@@ -274,10 +274,17 @@ def drifting_skeleton(joints: np.ndarray, skeleton: str, tolerance: float = 0.00
     :data:`DRIFT_SHARE` of the frames: noise varies from frame to frame, a wrong pose blended over one transition
     shortens bones in part of the clip only (calibration subjects 9-10, severity 2: of the seeded clips 100 % of
     drift, 0 % of jitter, 10 % of wrong anchors pass; no clean clip, whose bones are rigid). ``bones``: boolean mask
-    of the bones judged (default all; as :func:`~refiner.core.skeletons.rigid_skeleton`'s)."""
-    x = np.asarray(joints, np.float64)
+    of the bones judged (default all; as :func:`~refiner.core.skeletons.rigid_skeleton`'s). ``variation``: the clips'
+    worst variation ``(B,)`` as :func:`~refiner.core.skeletons.rigid_skeleton` returns it, when known: clips under
+    ``tolerance`` are rigid and not judged again (a batch of mocap costs nothing)."""
+    x = np.asarray(joints, np.float32)
     if x.ndim != 4 or x.shape[-1] != 3:
         raise ValueError(f"`joints` must be (B, T, J, 3); got shape {x.shape}.")
+    if variation is not None:
+        out, todo = np.zeros(len(x), bool), np.asarray(variation) > tolerance
+        if todo.any():
+            out[todo] = drifting_skeleton(x[todo], skeleton, tolerance, bones=bones)
+        return out
     lengths = bone_lengths(x, skeleton)  # (B, T, n_bones)
     if bones is not None:
         lengths = lengths[..., np.asarray(bones, bool)]
