@@ -20,6 +20,14 @@ def _error(y, x):
     return float(np.linalg.norm(np.asarray(y, np.float64) - x, axis=-1).mean())
 
 
+def _shipped(folder):
+    from pathlib import Path
+
+    import refiner
+
+    return Path(refiner.__file__).parent / "weights" / folder / "pose_prior.safetensors"
+
+
 def _turned(x, angle):
     """``x (..., J, 3)`` turned by ``angle`` about HumanAct12's up axis (y)."""
     c, s = np.cos(angle), np.sin(angle)
@@ -132,20 +140,33 @@ def test_shipped_prior_pulls_drifted_joints_back_and_leaves_clean_clips(humanact
 
 
 @pytest.mark.real_data
-def test_refiner_step_reports_and_keeps_to_the_mode(humanact12):
+def test_refiner_step_reports_every_change_in_every_mode(humanact12, tmp_path):
+    """A whole-clip step, like the rigid skeleton: every mode runs it; each changed frame is in a "pose" or
+    "skeleton" entry; files saved before the texture threshold load without it."""
     model = Refiner.pretrained("humanact12", split="train")
     m = next(c for c in humanact12.split("test").motions if len(c.joints) >= 60)
     bad = corrupt(m, "anchor_drift", 3, random_state=3).motion
-    out, report = model.refine(bad, action=m.action, return_report=True)
-    steps = [c for c in report.changes if c.get("repair") == "pose_prior"]
-    assert steps and all("pose prior" in c["reason"] and c["step"] in ("anchor", "transition") for c in steps)
     kept = Refiner.pretrained("humanact12", split="train", posing="keep").refine(bad, action=m.action)
-    assert not np.array_equal(out.joints, kept.joints)
-    for mode in ("anchor", "transition"):
-        _, r = model.refine(bad, action=m.action, mode=mode, return_report=True)
-        assert all(c["step"] == mode for c in r.changes if c.get("repair") == "pose_prior")
+    for mode in ("full", "anchor", "transition"):
+        out, report = model.refine(bad, action=m.action, mode=mode, return_report=True)
+        steps = [c for c in report.changes if c.get("repair") == "pose_prior"]
+        assert steps and all(c["step"] == "pose" and "pose prior" in c["reason"] for c in steps)
+        covered = np.zeros(len(out.joints), bool)
+        for c in report.changes:
+            covered[c["start"] : c["stop"]] = True
+        assert np.array_equal(out.joints[~covered], bad.joints[~covered])
+    assert not np.array_equal(model.refine(bad, action=m.action).joints, kept.joints)
     with pytest.raises(ValueError, match="posing"):
         Refiner.pretrained("humanact12", split="train", posing="snap")
+    import json
+
+    from refiner.core.serialization import load_state, save_state
+
+    tensors, meta = load_state(_shipped("humanact12-train"))
+    fitted = json.loads(meta["refiner.fitted"])
+    del fitted["texture_threshold_"]  # as files before the texture step
+    save_state(tmp_path / "old.safetensors", tensors, {**meta, "refiner.fitted": json.dumps(fitted)})
+    assert np.isinf(PosePrior.load(tmp_path / "old.safetensors").texture_threshold_)
 
 
 @pytest.mark.real_data

@@ -40,6 +40,8 @@ class NetworkComponent(BaseEstimator):
     """
 
     _fitted_attributes: tuple[str, ...] = ()
+    #: Values of fitted attributes that files saved before the attribute existed lack (others are required).
+    _attribute_defaults: dict = {}
     _fitted_arrays: tuple[str, ...] = ()
     _optional_arrays: tuple[str, ...] = ()
     _lower_triangular_arrays: tuple[str, ...] = ()
@@ -114,7 +116,9 @@ class NetworkComponent(BaseEstimator):
         params, fitted = check_metadata(path, metadata, cls)
         obj = cls(**cls._init_params(params))
         for name in cls._fitted_attributes:
-            setattr(obj, name, fitted[name])
+            if name not in fitted and name not in cls._attribute_defaults:
+                raise ValueError(f"{str(path)!r} lacks the fitted attribute {name!r} of a {cls.__name__}.")
+            setattr(obj, name, fitted[name] if name in fitted else cls._attribute_defaults[name])
         for name in cls._fitted_arrays + cls._optional_arrays:
             if f"array.{name}" in tensors:  # files before the packed layout hold whole matrices
                 setattr(obj, name, tensors[f"array.{name}"])

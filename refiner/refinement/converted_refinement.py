@@ -139,7 +139,8 @@ class ConvertedRefiner:
         drifting = (drifting_skeleton(clips, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
                     else np.zeros(len(clips), bool))
         drifting &= [not any(c.get("repair") == "pose_prior" for c in r.changes) for r in reports]
-        refined = prior_posed(self.base, refined, reports, drifting, mode or self.base.mode)
+        if getattr(self.base, "method", "learned") == "learned":  # the concepts pipeline has no pose-prior step
+            refined = prior_posed(self.base, refined, reports, drifting)
         changed = ~(refined == inner).reshape(*refined.shape[:2], -1).all(-1)  # (B, T)
         delta = convert(refined, self.base.skeleton, self.skeleton) - convert(inner, self.base.skeleton, self.skeleton)
         out = given.copy()

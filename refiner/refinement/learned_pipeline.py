@@ -397,4 +397,4 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
     noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
-    return prior_posed(refiner, out, reports, drifting, mode, noisy)
+    return prior_posed(refiner, out, reports, drifting, noisy)

@@ -21,7 +21,7 @@ frames' lengths, truer than the drifted ones (put back on the drifted clip's len
 corrections left 5.6 % of drift removed, not 33 %). It also runs on clips the noise step found noisy
 throughout (a generator's texture, judged against held-out clean clips), past the higher
 ``texture_threshold_`` (their 95th percentile): there it takes the a2m reference generator's FID from 4.10
-to 3.71 (600 samples). Calibration subjects 9-10, severity 2: anchor drift 12.6 -> 33.3 %, jitter 28.5 ->
+to 3.71 (600 samples). Calibration subjects 9-10, severity 2: anchor drift 12.6 -> 33.3 % (33.2 % before the texture step), jitter 28.5 ->
 28.4 %, every other family and the clean clips unchanged (README, table of choices).
 """
 from __future__ import annotations
@@ -121,13 +121,15 @@ class PosePrior(NetworkComponent):
     network_ : PosePriorNet
     skeleton_ : str
     threshold_ : float
-        Metres: the level under which no frame of a drifting skeleton changes (:meth:`calibrate`; infinite until then).
+        Metres: the level under which the prior corrects no frame of a drifting skeleton (the clip's refit onto rigid
+        bones still moves them, reported as a skeleton change; :meth:`calibrate`; infinite until then).
     texture_threshold_ : float
         Metres: the same for a clip noisy throughout, a generator's texture (:meth:`calibrate`; infinite until then).
     history_ : list of dict
     """
 
     _fitted_attributes = ("skeleton_", "n_joints_", "threshold_", "texture_threshold_", "history_")
+    _attribute_defaults = {"texture_threshold_": float("inf")}  # files before it: no texture step
 
     def __init__(self, *, hidden: int = 256, n_layers: int = 3, max_offset: float = 0.06,
                  clean_probability: float = 0.25, crop: int = 40, rigid_tolerance: float | None = 0.005,
@@ -299,15 +301,16 @@ def drifting_skeleton(joints: np.ndarray, skeleton: str, tolerance: float = 0.00
             & ((share * weight).sum(-1) >= DRIFT_SHARE))
 
 
-def prior_posed(refiner, clips: np.ndarray, reports: list, drifting: np.ndarray, mode: str = "full",
+def prior_posed(refiner, clips: np.ndarray, reports: list, drifting: np.ndarray,
                 noisy: np.ndarray | None = None) -> np.ndarray:
     """The pose-prior step, last: in the ``drifting (B,)`` clips of ``clips (B, T, J, 3)`` (:func:`drifting_skeleton`
     of the input), the frames the refiner's ``pose_prior`` would move further than ``threshold_`` corrected
     (:meth:`PosePrior.posed`), in the ``noisy (B,)`` ones (found noisy throughout by the noise step: a generator's
     texture) those it would move further than ``texture_threshold_``; then every frame put on the lengths of the
-    corrected clip (its medians, drawn toward the refiner's bone proportions where it uses them): the prior's poses
-    hold truer lengths than drifted ones. A run of corrected frames holding a recognised anchor is an anchor step,
-    else a transition step: only those of ``mode``; one report entry per run."""
+    corrected clip (the medians of all its frames, drawn toward the refiner's bone proportions where it uses them):
+    the prior's poses hold truer lengths than drifted ones. Like the other steps that judge a clip as a whole (rigid
+    skeleton, amplitude, noise throughout) it runs in every mode: a drift covers anchors and transitions alike. One
+    report entry (step ``"pose"``) per run of corrected frames, one ``"skeleton"`` entry for the frames the refit moved."""
     prior = getattr(refiner, "pose_prior", None)
     drifting = np.asarray(drifting, bool)
     noisy = np.zeros_like(drifting) if noisy is None else np.asarray(noisy, bool) & ~drifting
@@ -320,12 +323,7 @@ def prior_posed(refiner, clips: np.ndarray, reports: list, drifting: np.ndarray,
     proportions = refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None
     for k, b in enumerate(todo):
         runs, n_runs = label(prior.weight(level[k : k + 1], threshold[k : k + 1])[0] > 0)
-        anchors = np.asarray(reports[b].anchors, int)
-        keep, kinds = np.zeros(len(level[k]), bool), {}
-        for r in range(1, n_runs + 1):
-            frames = np.flatnonzero(runs == r)
-            kinds[r] = "anchor" if ((anchors >= frames[0]) & (anchors <= frames[-1])).any() else "transition"
-            keep[frames] = mode in ("full", kinds[r])
+        keep = runs > 0
         if not keep.any():
             continue
         y = np.where(keep[:, None, None], posed[k], clips[b])
@@ -338,15 +336,13 @@ def prior_posed(refiner, clips: np.ndarray, reports: list, drifting: np.ndarray,
             moved = 100 * float(np.linalg.norm(out[b][frames] - clips[b][frames], axis=-1).mean())
             reports[b].changes.append({
                 "start": int(frames[0]), "stop": int(frames[-1] + 1), "step": "skeleton", "reason":
-                    f"{why}: every frame put back on the bone lengths of the frames the pose prior corrected "
+                    f"{why}: every frame put back on the bone lengths of the clip the pose prior corrected "
                     f"({len(frames)} frames outside them moved {moved:.2f} cm on average)"})
-        for r, kind in kinds.items():
-            frames = np.flatnonzero((runs == r) & keep)
-            if not frames.size:
-                continue
+        for r in range(1, n_runs + 1):
+            frames = np.flatnonzero(runs == r)
             moved = 100 * float(np.linalg.norm(out[b][frames] - clips[b][frames], axis=-1).mean())
             reports[b].changes.append({
-                "start": int(frames[0]), "stop": int(frames[-1] + 1), "step": kind, "repair": "pose_prior",
+                "start": int(frames[0]), "stop": int(frames[-1] + 1), "step": "pose", "repair": "pose_prior",
                 "reason": f"{why}; the pose prior's correction reached {100 * float(level[k, frames].max()):.2f} cm "
                           f"(threshold {100 * float(threshold[k]):.2f} cm, over {prior.window} frames): corrected by "
                           f"it and put back on rigid bones (moved {moved:.2f} cm on average)"})
