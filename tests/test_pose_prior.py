@@ -209,3 +209,14 @@ def test_clips_noisy_throughout_get_the_texture_threshold():
                          for c in steps)
     kept = Refiner.pretrained("humanact12", split="train", posing="keep").refine(clips, action=[1] * len(clips))
     assert not np.array_equal(out, kept)
+    assert [r.noisy_throughout for r in reports] == noisy.tolist()
+    # drifting too: the drift threshold, natively and through the uestc conversion alike
+    from refiner.core.skeletons import convert
+
+    t = np.linspace(0, 1, clips.shape[1])[None, :, None, None]
+    drift = (clips + t * np.random.default_rng(0).normal(size=(len(clips), 1, 24, 3)) * 0.05).astype(np.float32)
+    uestc = np.stack([convert(c, "humanact12", "uestc") for c in drift]).astype(np.float32)
+    for name, x in (("humanact12", drift), ("uestc", uestc)):
+        _, reports = Refiner.pretrained(name, split="train").refine(x, return_report=True)
+        reasons = [c["reason"] for r in reports for c in r.changes if c.get("repair") == "pose_prior"]
+        assert reasons and all(f"threshold {100 * prior.threshold_:.2f} cm" in why for why in reasons), name

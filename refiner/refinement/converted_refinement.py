@@ -12,6 +12,8 @@ action-agnostic.
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from refiner.core.motion import Motion
@@ -129,18 +131,18 @@ class ConvertedRefiner:
         inner_prior = self.base.bone_proportions if getattr(self.base, "rigid_lengths", None) == "proportions" else None
         inner = np.stack([rigid_skeleton(c, self.base.skeleton, self.rigid_tolerance, proportions=inner_prior)[0]
                           for c in convert(given, self.skeleton, self.base.skeleton)]).astype(np.float32)
+        base = copy.copy(self.base)  # its pose prior runs below, once, with this clip's own drift gate
+        base.posing = "keep"
         if batched:
-            refined, reports = self.base.refine(inner, action=known, mode=mode, return_report=True)
+            refined, reports = base.refine(inner, action=known, mode=mode, return_report=True)
         else:
-            one, report = self.base.refine(inner[0], action=known[0], mode=mode, return_report=True)
+            one, report = base.refine(inner[0], action=known[0], mode=mode, return_report=True)
             refined, reports = one[None], [report]
-        # the pose prior's drift gate reads this clip's own bones (the base's rigid step is off: tolerance inf);
-        # a clip the base already corrected (noisy throughout) is not corrected twice
+        # the pose prior's drift gate reads this clip's own bones (the base's rigid step is off: tolerance inf)
         drifting = (drifting_skeleton(clips, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
                     else np.zeros(len(clips), bool))
-        drifting &= [not any(c.get("repair") == "pose_prior" for c in r.changes) for r in reports]
         if getattr(self.base, "method", "learned") == "learned":  # the concepts pipeline has no pose-prior step
-            refined = prior_posed(self.base, refined, reports, drifting)
+            refined = prior_posed(self.base, refined, reports, drifting, [r.noisy_throughout for r in reports])
         changed = ~(refined == inner).reshape(*refined.shape[:2], -1).all(-1)  # (B, T)
         delta = convert(refined, self.base.skeleton, self.skeleton) - convert(inner, self.base.skeleton, self.skeleton)
         out = given.copy()

@@ -350,6 +350,8 @@ def filtered_noise(refiner, clips: np.ndarray, reports: list, noise_probability:
         return clips, np.zeros(len(clips), bool)
     denoised, levels = noise_filter.denoise_clips(clips)
     rows = np.flatnonzero(levels > noise_filter.threshold_)
+    for b in rows:
+        reports[b].noisy_throughout = True
     out = _put_back(refiner, clips, denoised[rows], rows, reports, lambda b, n: (
         f"noisy throughout: estimated noise {100 * float(levels[b]):.2f} cm per coordinate in three frames of four "
         f"(threshold {100 * noise_filter.threshold_:.2f} cm); {n} noisy frames denoised by the learned noise filter"))

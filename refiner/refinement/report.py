@@ -35,6 +35,8 @@ class RefinementReport:
     changes: list[dict] = field(default_factory=list)
     note: str = ""
     notes: list[str] = field(default_factory=list)
+    #: The noise step found the clip noisy throughout (a generator's texture; the pose prior's second gate).
+    noisy_throughout: bool = False
 
     @property
     def changed_frames(self) -> np.ndarray:
