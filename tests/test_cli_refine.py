@@ -170,3 +170,18 @@ def test_concept_snap_option(clip, tmp_path, capsys):
     assert "concept_snap" in capsys.readouterr().err
     assert main(["refine", str(src), "-o", str(out), "--concept-snap", "1", "--force"]) == 2  # no action to snap to
     assert "needs `--action`" in capsys.readouterr().err
+
+
+@pytest.mark.real_data
+def test_texture_option_filters_every_clip_only_when_asked(clip, tmp_path, capsys):
+    src = tmp_path / "walk.npy"
+    np.save(src, clip)
+    assert main(["refine", str(src), "-o", str(tmp_path / "all.npy"), "--texture", "all", "--report"]) == 0
+    report = json.loads((tmp_path / "all.report.json").read_text())
+    assert [c["step"] for c in report["clips"][0]["changes"]].count("texture") == 1
+    assert np.abs(np.load(tmp_path / "all.npy") - clip).max() > 1e-4  # taken for a generator's clip: filtered
+    assert main(["refine", str(src), "-o", str(tmp_path / "auto.npy")]) == 0  # default for joints: off
+    np.testing.assert_array_equal(np.load(tmp_path / "auto.npy"), clip)  # a real walk is not noisy throughout
+    with pytest.raises(SystemExit) as exit_:
+        main(["refine", str(src), "-o", str(tmp_path / "x.npy"), "--texture", "some"])
+    assert exit_.value.code == 2 and "--texture" in capsys.readouterr().err

@@ -102,17 +102,17 @@ def test_default_refiner_is_the_pretrained_pipeline(pm, monkeypatch, xyz_options
 
     class FakeRefiner:
         @classmethod
-        def pretrained(cls, skeleton):
-            calls.append(skeleton)
+        def pretrained(cls, skeleton, **options):
+            calls.append((skeleton, options))
             return LiftingRefiner()
 
     monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", types.SimpleNamespace(Refiner=FakeRefiner))
     gen = RefinedGenerator(XyzVae(), adapter="action2motion", adapter_options=xyz_options, plugin_manager=pm)
-    assert calls == ["humanact12"] and isinstance(gen.refiner, LiftingRefiner)
+    assert calls == [("humanact12", {"texture": "all"})] and isinstance(gen.refiner, LiftingRefiner)
 
     class NoWeights:
         @classmethod
-        def pretrained(cls, skeleton):
+        def pretrained(cls, skeleton, **options):
             raise ValueError("no shipped weights")
 
     monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", types.SimpleNamespace(Refiner=NoWeights))

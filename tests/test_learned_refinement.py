@@ -51,6 +51,9 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert again.manifest["learned"]["pose_prior_threshold_m"] == pytest.approx(again.pose_prior.threshold_)
     assert again.pose_prior.texture_threshold_ >= again.pose_prior.threshold_  # the 95th percentile, the median
     assert again.manifest["learned"]["pose_prior_texture_threshold_m"] == pytest.approx(again.pose_prior.texture_threshold_)
+    assert again.texture_filter is not None and again.texture_filter.channels == 8 and again.texture == "off"
+    _, report = Refiner.load(out, texture="all").refine(humanact12[10].joints[:50], return_report=True)
+    assert [c["step"] for c in report.changes].count("texture") == 1  # every clip, as a generator's
     assert np.isfinite(again.timing_estimator.threshold_)
     assert again.manifest["learned"]["timing_threshold_frames"] == pytest.approx(again.timing_estimator.threshold_)
     flagged = Refiner.load(out, retiming="flagged")
@@ -75,7 +78,7 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
     parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
     assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer",
-                          "pose_prior", "flaw_denoiser", "motion_infiller", "timing_estimator"}
+                          "pose_prior", "texture_filter", "flaw_denoiser", "motion_infiller", "timing_estimator"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
 
 

@@ -45,6 +45,9 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--concept-snap", type=float, default=0.0, metavar="W",
                    help="move every anchor W of the way (0-1) onto its action's nearest anchor concept; needs "
                         "--action; realism over fidelity (default 0: off)")
+    p.add_argument("--texture", default=None, choices=["auto", "all", "off"],
+                   help="clips through the texture filter: those noisy throughout (auto), every clip (all: generator "
+                        "output), none (off); default: all with --adapter (raw generator output), else off")
     p.add_argument("--report", action="store_true", help="write <out>.report.json next to each output")
     p.add_argument("--gif", action="store_true", help="write a before/after <out>.gif next to each output")
     gif_size_argument(p)
@@ -83,6 +86,7 @@ def refine_run(args: argparse.Namespace) -> int:
     if args.concept_snap and args.action is None:  # an inferred action is never snapped to: it would do nothing
         raise ValueError("`--concept-snap` needs `--action`: the anchors are snapped onto that action's concepts.")
     snap = {"concept_snap": args.concept_snap} if args.concept_snap else {}
+    snap["texture"] = args.texture or ("all" if args.adapter is not None else "off")  # an adapter's input is generated
     refiner = Refiner.load(args.refiner, **snap) if args.refiner is not None else Refiner.pretrained(skeleton, **snap)
     pm = get_plugin_manager() if args.adapter is not None else None
     if pm is not None:

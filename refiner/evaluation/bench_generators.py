@@ -2,7 +2,8 @@
 
 The record (``generators.json``): ``per_action`` (samples per HumanAct12 action), ``n_replications``,
 ``reference_clips`` (real clips of subjects 11-12) and ``rows``: per ``<kind>/generated``,
-``<kind>/refined``, ``<kind>/snapped`` (refined with the concept-snap option, ``concept_snap=1``) and ``real``
+``<kind>/refined`` (as :class:`~refiner.refinement.refined_generator.RefinedGenerator` refines: ``texture="all"``),
+``<kind>/snapped`` (the same with the concept-snap option, ``concept_snap=1``) and ``real``
 (train clips of subjects 1-10), ``samples``, ``metrics``
 (:func:`~refiner.evaluation.protocol.evaluate` summary, metric -> ``[mean, 95 % half-width]``) and
 ``physics`` (:func:`physical_record`: mean joint acceleration m/s², foot-skating ratio, bone-length
@@ -53,8 +54,9 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
     progress = progress or ignore_progress
     dataset, recognizer = load_humanact12_and_recognizer(data, hidden="random")
     real = dataset.split("test")
-    refiners = {"refined": Refiner.pretrained("humanact12", split="train"),
-                "snapped": Refiner.pretrained("humanact12", split="train", concept_snap=1.0)}
+    # as RefinedGenerator refines a generator's clips: every one through the texture filter (texture="all")
+    refiners = {"refined": Refiner.pretrained("humanact12", split="train", texture="all"),
+                "snapped": Refiner.pretrained("humanact12", split="train", texture="all", concept_snap=1.0)}
     # the paper's Table 1 protocol: 3,000 samples (250 per action), 20 replications
     per_action, n_rep = (3, 2) if quick else (250, 20)
     n_actions = len(dataset.action_names)

@@ -12,7 +12,7 @@ from sklearn.base import BaseEstimator
 from refiner.core.serialization import (check_metadata, dequantize_rows, load_state, pack_lower, pack_metadata,
                                         quantize_rows, save_state, unpack_lower)
 from refiner.core.validation import check_is_fitted
-from refiner.nn.training import TrainSchedule, resolve_device
+from refiner.nn.training import TrainSchedule, fit_network, random_crops, resolve_device, seeded, to_device
 
 __all__ = ["NetworkComponent", "NOT_FITTED", "INT8_MIN_SIZE"]
 
@@ -46,6 +46,28 @@ class NetworkComponent(BaseEstimator):
     _optional_arrays: tuple[str, ...] = ()
     _lower_triangular_arrays: tuple[str, ...] = ()
     _symmetric_arrays: tuple[str, ...] = ()
+
+    def _fit_on_crops(self, clips: list, validation, flawed, loss, rng: np.random.Generator, *, checkpoint=None,
+                      desc: str = "train") -> None:
+        """Fit ``network_`` (from ``_make_network`` of ``n_joints_`` and ``skeleton_``) on random ``crop``-frame crops
+        of real ``clips`` spoiled by ``flawed(clean, rng)``: batches ``{"flawed", "clean"}`` (N, crop, J, 3) for
+        ``loss(network, batch, rng)``; 256 crops of ``validation`` (default the clips) judge the epochs."""
+        schedule = self._schedule()
+        device = resolve_device(schedule.device)
+        held = [np.asarray(c, np.float32) for c in (validation if validation is not None else clips)]
+        val_rng = np.random.default_rng(7)
+        val_clean = random_crops(held, self.crop, 256, val_rng)
+        val = to_device({"flawed": flawed(val_clean, val_rng), "clean": val_clean}, device)
+
+        def batch(idx, r):
+            clean = random_crops(clips, self.crop, len(idx), r)
+            return to_device({"flawed": flawed(clean, r), "clean": clean}, device)
+
+        with seeded(rng):
+            self.network_ = self._make_network({"n_joints_": self.n_joints_, "skeleton_": self.skeleton_}).to(device)
+            self.history_ = fit_network(self.network_, loss, batch, len(clips), val, schedule, rng,
+                                        checkpoint=checkpoint, desc=desc)
+        self.network_.to("cpu").eval()
 
     def _schedule(self) -> TrainSchedule:
         """The schedule ``fit`` trains with (``ValueError`` when ``schedule`` is not a TrainSchedule)."""

@@ -22,7 +22,7 @@ from tqdm.auto import tqdm
 
 from refiner.core.serialization import load_state, save_state
 
-__all__ = ["ClipCrops", "TrainSchedule", "crop_start", "fit_network", "put_crop", "resolve_device", "seeded", "to_device"]
+__all__ = ["ClipCrops", "TrainSchedule", "crop_start", "fit_network", "put_crop", "random_crops", "resolve_device", "seeded", "to_device"]
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +102,17 @@ def crop_start(n_frames: int, length: int, rng: np.random.Generator, *, holding:
     if holding is not None:
         lo, hi = max(0, holding - length + 1), min(holding, hi)
     return int(rng.integers(lo, max(hi, lo) + 1))
+
+
+def random_crops(clips: Sequence[np.ndarray], length: int, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` random ``length``-frame crops ``(n, length, J, 3)`` float32 of clips ``(T_i, J, 3)``, in place (not
+    re-centred); a shorter clip's crop repeats its last frame."""
+    out = np.zeros((n, length, *np.shape(clips[0])[1:]), np.float32)
+    for k, i in enumerate(rng.integers(len(clips), size=n)):
+        s = crop_start(len(clips[i]), length, rng)
+        part = clips[i][s : s + length]
+        out[k, : len(part)], out[k, len(part) :] = part, part[-1]
+    return out
 
 
 def put_crop(out: np.ndarray, b: int, frames: np.ndarray, origin, *, pad: bool = True) -> int:

@@ -23,6 +23,7 @@ from refiner.core.skeletons import BoneProportions, get_skeleton, rigid_skeleton
 from refiner.core.validation import check_joints
 from refiner.refinement.inputs import MIN_FRAMES, check_metres_each, thread_limits
 from refiner.refinement.pose_prior import drifting_skeleton, prior_posed
+from refiner.refinement.texture_filter import filtered_texture
 
 __all__ = ["ConvertedRefiner", "FLEXIBLE_BONES", "converts_with_humanact12"]
 
@@ -131,8 +132,8 @@ class ConvertedRefiner:
         inner_prior = self.base.bone_proportions if getattr(self.base, "rigid_lengths", None) == "proportions" else None
         inner = np.stack([rigid_skeleton(c, self.base.skeleton, self.rigid_tolerance, proportions=inner_prior)[0]
                           for c in convert(given, self.skeleton, self.base.skeleton)]).astype(np.float32)
-        base = copy.copy(self.base)  # its pose prior runs below, once, with this clip's own drift gate
-        base.posing = "keep"
+        base = copy.copy(self.base)  # its pose prior and texture filter run below, once, with this clip's own drift gate
+        base.posing, base.texture = "keep", "off"
         if batched:
             refined, reports = base.refine(inner, action=known, mode=mode, return_report=True)
         else:
@@ -142,7 +143,8 @@ class ConvertedRefiner:
         drifting = (drifting_skeleton(clips, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
                     else np.zeros(len(clips), bool))
         if getattr(self.base, "method", "learned") == "learned":  # the concepts pipeline has no pose-prior step
-            refined = prior_posed(self.base, refined, reports, drifting, [r.noisy_throughout for r in reports])
+            noisy = np.array([r.noisy_throughout for r in reports], bool)
+            refined = filtered_texture(self.base, prior_posed(self.base, refined, reports, drifting, noisy), reports, noisy)
         changed = ~(refined == inner).reshape(*refined.shape[:2], -1).all(-1)  # (B, T)
         delta = convert(refined, self.base.skeleton, self.skeleton) - convert(inner, self.base.skeleton, self.skeleton)
         out = given.copy()

@@ -10,11 +10,24 @@ import numpy as np
 import torch
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["MODES", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_metres",
+__all__ = ["MODES", "METHODS", "RIGID_LENGTHS", "RETIMING", "DENOISING", "AMPLITUDE", "POSING", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_metres",
            "check_metres_each", "check_threads", "thread_limits"]
 
 #: Which refinement steps run after recognition.
 MODES = ("full", "anchor", "transition")
+#: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
+METHODS = ("learned", "concepts")
+#: Lengths of the rigid skeleton: the clip's medians drawn toward learned proportions, or the medians.
+RIGID_LENGTHS = ("proportions", "median")
+#: Timing flaws: the estimator's runs re-timed first (``"estimated"``); flagged retraces cut and the stalls in runs
+#: flagged as timing re-timed (``"flagged"``, and after the estimator); the stalls only (``"stalls"``).
+RETIMING = ("estimated", "flagged", "stalls")
+#: Noise: flagged runs, noise-group runs, clips noisy throughout (``"filter"``); no noise-group runs (``"throughout"``); flagged runs only.
+DENOISING = ("filter", "throughout", "flagged")
+#: Clips that move too little for their action: scaled back (``"restore"``) or kept (``"keep"``).
+AMPLITUDE = ("restore", "keep")
+#: Poses off real motion: corrected by the pose prior (``"prior"``) or kept (``"keep"``).
+POSING = ("prior", "keep")
 #: Shortest clip refined; shorter ones pass through unchanged (reported).
 MIN_FRAMES = 8
 #: ``threads="auto"`` uses more than one thread from this many clips in a batch on.

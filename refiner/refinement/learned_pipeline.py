@@ -15,11 +15,12 @@
    along their own path where they stall (:mod:`refiner.refinement.repair_candidates`), a body that glides or
    floats is corrected by the repair network (:class:`~refiner.refinement.learned_refinement.FlawRepairer`,
    one forward pass for the batch) and moved back over its planted feet
-   (:mod:`refiner.core.contact`), noise is filtered; root and pose repairs are kept only when the
-   flaw classifier finds the result more real (:data:`VERIFY_TYPED`). Only the flagged runs are
-   spliced in (displacement zero at the kept frames, smoothstep taper), and changed frames go back
-   on the input's bone lengths. A run that contains a recognised anchor is reported as an anchor refinement, the
-   others as transition refinements. Last, the noise steps (:func:`filtered_noise`) and the pose prior (:func:`prior_posed`).
+   (:mod:`refiner.core.contact`), noise is filtered; root and pose repairs are kept only when the flaw classifier
+   finds the result more real (:data:`VERIFY_TYPED`). Only the flagged runs are spliced in (displacement zero at the
+   kept frames, smoothstep taper), and changed frames go back on the input's bone lengths. A run that contains a
+   recognised anchor is reported as an anchor refinement, the others as transition refinements. Last, the noise steps
+   (:func:`filtered_noise`), the pose prior (:func:`prior_posed`) and the texture filter
+   (:func:`~refiner.refinement.texture_filter.filtered_texture`).
 """
 from __future__ import annotations
 
@@ -36,6 +37,7 @@ from refiner.refinement.retrace import cut_retraces
 from refiner.refinement.noise_filter import filtered_noise
 from refiner.refinement.pose_prior import drifting_skeleton, prior_posed
 from refiner.refinement.timing_estimation import estimated_retiming
+from refiner.refinement.texture_filter import filtered_texture
 from refiner.refinement.report import RefinementReport, start_reports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
 from refiner.refinement.training_flaws import GROUPS
@@ -297,14 +299,12 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
         clf_all[again] = refiner.flaw_classifier.predict_all(cut[again])  # a cut clip is judged anew
     clips, rec, threshold = cut, refiner.flaw_recognizer.predict(cut, actions), float(refiner.flaw_recognizer.threshold_)
     if use_clf:
-        clf = clf_all[..., 0]
-        clf_threshold = float(refiner.flaw_classifier.threshold_)
+        clf, clf_threshold = clf_all[..., 0], float(refiner.flaw_classifier.threshold_)
     if use_cor:
         correction = refiner.flaw_repairer.correction(clips, actions)
         cor_threshold = float(refiner.flaw_repairer.correction_threshold_)
     if use_den:
-        denoised = refiner.flaw_denoiser.correction(clips)
-        den_threshold = float(refiner.flaw_denoiser.threshold_)
+        denoised, den_threshold = refiner.flaw_denoiser.correction(clips), float(refiner.flaw_denoiser.threshold_)
     runs_per_clip, suspect = [], np.zeros(clips.shape[:2], bool)
     for b, report in enumerate(reports):
         if report.action is None:
@@ -397,4 +397,4 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
     noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
-    return prior_posed(refiner, out, reports, drifting, noisy)
+    return filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)

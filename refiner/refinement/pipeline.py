@@ -5,7 +5,8 @@ and repair networks, :mod:`refiner.refinement.learned_pipeline`, the default) or
 transition residuals, the paper's variants as options, :mod:`refiner.refinement.concepts_pipeline`). Do no harm: only
 flagged frames change, spliced in without jumps and put back on the input's bone lengths (:mod:`refiner.refinement.splicing`),
 but for the steps that judge a clip as a whole (stretching bones, damped amplitude, noise throughout), the pose prior's
-frames (further off real motion than held-out real clips go) and the concept-snap option (off by default).
+frames (further off real motion than held-out real clips go), the texture filter's (clips known or found to be a
+generator's) and the concept-snap option (off by default).
 """
 from __future__ import annotations
 
@@ -33,10 +34,12 @@ from refiner.refinement.converted_refinement import ConvertedRefiner, converts_w
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.infilling import MotionInfiller
-from refiner.refinement.inputs import MODES, auto_threads, check_choice, check_choices, check_metres, check_metres_each, check_threads, thread_limits
+from refiner.refinement.inputs import (AMPLITUDE, DENOISING, METHODS, MODES, POSING, RETIMING, RIGID_LENGTHS,
+                                       auto_threads, check_choice, check_choices, check_metres, check_metres_each, check_threads, thread_limits)
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pose_prior import PosePrior
+from refiner.refinement.texture_filter import TEXTURE, TextureFilter
 from refiner.refinement.report import RefinementReport
 from refiner.refinement.splicing import project_bone_lengths, splice
 from refiner.refinement.transition_refinement import TransitionRefiner
@@ -61,21 +64,9 @@ _PARTS = {
     "noise_filter": NoiseFilter,
     "amplitude_restorer": AmplitudeRestorer,
     "pose_prior": PosePrior,
+    "texture_filter": TextureFilter,
 }
 _NO_DEVICE = ("anchor_concepts", "anchor_quality", "amplitude_restorer")
-#: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
-METHODS = ("learned", "concepts")
-#: Lengths of the rigid skeleton: the clip's medians drawn toward learned proportions, or the medians.
-RIGID_LENGTHS = ("proportions", "median")
-#: Timing flaws: the estimator's runs re-timed first (``"estimated"``); flagged retraces cut and the stalls in runs
-#: flagged as timing re-timed (``"flagged"``, and after the estimator); the stalls only (``"stalls"``).
-RETIMING = ("estimated", "flagged", "stalls")
-#: Noise: flagged runs, noise-group runs, clips noisy throughout (``"filter"``); no noise-group runs (``"throughout"``); flagged runs only.
-DENOISING = ("filter", "throughout", "flagged")
-#: Clips that move too little for their action: scaled back (``"restore"``) or kept (``"keep"``).
-AMPLITUDE = ("restore", "keep")
-#: Poses off real motion: corrected by the pose prior, last (``"prior"``), or kept (``"keep"``).
-POSING = ("prior", "keep")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 #: Thresholds a manifest's ``calibration`` entry may hold; they belong to the steps, which save them.
 _CALIBRATED = ("anchor_threshold", "transition_threshold", "transition_thresholds")
@@ -105,11 +96,14 @@ class Refiner:
         by ``margin=2``, extended while the score stays above ``hysteresis=0.5`` of it; ``change_penalty=0.01``
         is the flaw probability a ``"select"`` candidate must gain per centimetre; a clip whose bone lengths
         vary more than ``rigid_tolerance=0.005`` (std / mean; mocap: under 0.001 %) is put back on rigid bones.
-    timing_estimator, noise_filter, amplitude_restorer, pose_prior : optional
+    timing_estimator, noise_filter, amplitude_restorer, pose_prior, texture_filter : optional
         The learned re-timing step (:mod:`refiner.refinement.timing_estimation`), noise filter
         (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead),
-        amplitude step (:mod:`refiner.refinement.amplitude`; ``amplitude="keep"`` skips it) and pose prior
-        (:mod:`refiner.refinement.pose_prior`, last; ``posing="keep"`` skips it).
+        amplitude step (:mod:`refiner.refinement.amplitude`; ``amplitude="keep"`` skips it), pose prior
+        (:mod:`refiner.refinement.pose_prior`; ``posing="keep"`` skips it) and texture filter
+        (:mod:`refiner.refinement.texture_filter`, last, on the clips ``texture`` names: "off", the default (a mocap
+        clip may be given); "all", every clip, for a generator's clips, as :class:`RefinedGenerator` uses; "auto", those
+        the noise step found noisy throughout).
     retiming : {"estimated", "flagged", "stalls"}, optional
         ``"estimated"`` (default with a ``timing_estimator``): its runs re-timed before detection, then as "flagged":
         flagged retraces cut (:mod:`refiner.refinement.retrace`) and flagged stalls re-timed; ``"stalls"``: stalls only.
@@ -147,11 +141,12 @@ class Refiner:
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
                  anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None,
                  flaw_denoiser=None, motion_infiller=None, timing_estimator=None, noise_filter=None,
-                 amplitude_restorer=None, pose_prior=None, *,
+                 amplitude_restorer=None, pose_prior=None, texture_filter=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, retiming: str | None = None,
-                 denoising: str | None = None, amplitude: str = "restore", posing: str = "prior", concept_snap: float = 0.0,
+                 denoising: str | None = None, amplitude: str = "restore", posing: str = "prior", texture: str = "off",
+                 concept_snap: float = 0.0,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | str | None = "auto", manifest: dict | None = None):
@@ -160,6 +155,7 @@ class Refiner:
         self.flaw_recognizer, self.flaw_repairer, self.flaw_classifier = flaw_recognizer, flaw_repairer, flaw_classifier
         self.flaw_denoiser, self.motion_infiller, self.timing_estimator = flaw_denoiser, motion_infiller, timing_estimator
         self.noise_filter, self.amplitude_restorer, self.pose_prior = noise_filter, amplitude_restorer, pose_prior
+        self.texture_filter, self.texture = texture_filter, check_choice("texture", texture, TEXTURE)
         self.amplitude, self.posing = check_choice("amplitude", amplitude, AMPLITUDE), check_choice("posing", posing, POSING)
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)

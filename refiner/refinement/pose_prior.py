@@ -36,7 +36,7 @@ from torch import nn
 from refiner.core.skeletons import bone_lengths, get_skeleton, rigid_skeleton
 from refiner.core.validation import check_is_fitted, check_joint_batch, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
-from refiner.nn.training import TrainSchedule, crop_start, fit_network, resolve_device, seeded, to_device
+from refiner.nn.training import TrainSchedule
 
 __all__ = ["PosePrior", "PosePriorNet", "body_frame", "drifting_skeleton", "prior_posed", "OFFSETS", "DRIFT_AUTOCORRELATION",
            "DRIFT_SHARE", "DRIFT_OFF", "DRIFT_BONES"]
@@ -173,14 +173,6 @@ class PosePrior(NetworkComponent):
             flawed = rigid_skeleton(flawed, self.skeleton_, self.rigid_tolerance, iterations=30)[0]  # enough for training
         return flawed.astype(np.float32)
 
-    def _crops(self, clips, rng, n: int) -> np.ndarray:
-        out = np.zeros((n, self.crop, self.n_joints_, 3), np.float32)
-        for k, i in enumerate(rng.integers(len(clips), size=n)):
-            c = clips[i]
-            s = crop_start(len(c), self.crop, rng)
-            part = c[s : s + self.crop]
-            out[k, : len(part)], out[k, len(part) :] = part, part[-1]
-        return out
 
     def fit(self, clips, *, skeleton: str = "humanact12", validation=None, checkpoint=None) -> "PosePrior":
         """Train on real clips ``(T_i, J, 3)`` metres (T_i >= 2); ``validation``: held-out clips."""
@@ -193,22 +185,7 @@ class PosePrior(NetworkComponent):
         self.skeleton_ = get_skeleton(skeleton).name
         self.n_joints_ = int(clips[0].shape[1])
         self.threshold_ = self.texture_threshold_ = float("inf")
-        schedule = self._schedule()
-        device = resolve_device(schedule.device)
-        held = [np.asarray(c, np.float32) for c in (validation if validation is not None else clips)]
-        val_rng = np.random.default_rng(7)
-        val_clean = self._crops(held, val_rng, 256)
-        val = to_device({"flawed": self._flawed(val_clean, val_rng), "clean": val_clean}, device)
-
-        def batch(idx, r):
-            clean = self._crops(clips, r, len(idx))
-            return to_device({"flawed": self._flawed(clean, r), "clean": clean}, device)
-
-        with seeded(rng):
-            self.network_ = self._make_network({"n_joints_": self.n_joints_, "skeleton_": self.skeleton_}).to(device)
-            self.history_ = fit_network(self.network_, _loss, batch, len(clips), val, schedule, rng,
-                                        checkpoint=checkpoint, desc="pose prior")
-        self.network_.to("cpu").eval()
+        self._fit_on_crops(clips, validation, self._flawed, _loss, rng, checkpoint=checkpoint, desc="pose prior")
         return self
 
     def _checked(self, joints) -> np.ndarray:

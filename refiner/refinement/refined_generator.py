@@ -40,7 +40,8 @@ class RefinedGenerator:
     refiner : object or callable, optional
         An object with ``refine(motion, *, action=None, return_report=False)`` returning a Motion
         (or ``(Motion, report)`` when ``return_report``), or a callable ``(Motion) -> Motion``.
-        Default: ``refiner.refinement.pipeline.Refiner.pretrained(skeleton)``; when that cannot be imported,
+        Default: ``refiner.refinement.pipeline.Refiner.pretrained(skeleton, texture="all")`` (every clip through the
+        texture filter: they are all generated); when that cannot be imported,
         the identity with a warning.
     skeleton : str, optional
         Target skeleton, one the adapter produces. Default: the adapter's first.
@@ -198,7 +199,8 @@ class RefinedGenerator:
 
 
 def _default_refiner(skeleton: str):
-    """``refiner.refinement.pipeline.Refiner.pretrained(skeleton)``, or the identity with a warning if unavailable."""
+    """``refiner.refinement.pipeline.Refiner.pretrained(skeleton, texture="all")``, or the identity with a warning if
+    unavailable."""
     try:
         # on first use: the pipeline brings torch and the networks, which `import refiner` must not load
         from refiner.refinement.pipeline import Refiner
@@ -213,7 +215,7 @@ def _default_refiner(skeleton: str):
         )
         return identity_refiner
     try:
-        return pretrained(skeleton)
+        return pretrained(skeleton, texture="all")  # its clips are all a generator's: the texture filter takes every one
     except ValueError as e:
         raise ValueError(f"the default refiner Refiner.pretrained({skeleton!r}) failed: {e} Pass refiner=... "
                          f"to choose one.") from e

@@ -25,6 +25,7 @@ from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
 from refiner.refinement.pose_prior import PosePrior
+from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.timing_estimation import TimingEstimator
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
@@ -56,10 +57,15 @@ CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
 #: one CPU core) and the motion in-filler (about 40), and their tiny test version.
 CORRECTION_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
-LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer", "pose_prior")
+LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer", "pose_prior",
+                 "texture_filter")
 #: The pose prior's settings (about 13 minutes on one CPU core) and its tiny test version.
 POSE_PRIOR_CONFIGS = {"default": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, crop=16, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
+#: The texture filter's settings (about 25 minutes on one CPU core) and its tiny test version.
+TEXTURE_FILTER_CONFIGS = {"default": dict(schedule=dict()),
+                          "tiny": dict(channels=8, dilations=(1,), crop=16, schedule=dict(n_epochs=2, steps_per_epoch=2,
+                                                                                         batch_size=8))}
 #: The pose prior corrects frames of drifting skeletons where it would move them further than this quantile of its
 #: corrections of held-out clean frames (people it never saw), frames of clips noisy throughout beyond the second.
 POSE_QUANTILE, POSE_TEXTURE_QUANTILE = 0.5, 0.95
@@ -76,9 +82,11 @@ TIMING_CONFIGS = {"default": dict(schedule=dict()),
                   "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
             "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator,
-            "noise_filter": NoiseFilter, "amplitude_restorer": AmplitudeRestorer, "pose_prior": PosePrior}
+            "noise_filter": NoiseFilter, "amplitude_restorer": AmplitudeRestorer, "pose_prior": PosePrior,
+            "texture_filter": TextureFilter}
 _CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": CORRECTION_CONFIGS, "motion_infiller": CORRECTION_CONFIGS,
-            "timing_estimator": TIMING_CONFIGS, "pose_prior": POSE_PRIOR_CONFIGS}
+            "timing_estimator": TIMING_CONFIGS, "pose_prior": POSE_PRIOR_CONFIGS,
+            "texture_filter": TEXTURE_FILTER_CONFIGS}
 
 
 def calibration_split(subjects) -> np.ndarray:
@@ -143,7 +151,8 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         cfg = dict(_CONFIGS.get(name, LEARNED_CONFIGS)[config])
         schedule = replace(cls().schedule, **cfg.pop("schedule"), **run)
         est = cls(**cfg, schedule=schedule, random_state=random_state)
-        if name in ("flaw_classifier", "flaw_denoiser", "motion_infiller", "timing_estimator", "pose_prior"):  # action-agnostic
+        if name in ("flaw_classifier", "flaw_denoiser", "motion_infiller", "timing_estimator", "pose_prior",
+                    "texture_filter"):  # action-agnostic
             est.fit(pick(fit_idx)[0], skeleton=skeleton, validation=pick(cal_idx)[0],
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         elif name == "flaw_recognizer":
@@ -180,6 +189,7 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.noise_filter = parts.get("noise_filter")
     refiner.amplitude_restorer = parts.get("amplitude_restorer")
     refiner.pose_prior = parts.get("pose_prior")
+    refiner.texture_filter = parts.get("texture_filter")
     refiner.denoising = "filter" if refiner.noise_filter is not None else "flagged"
     refiner.retiming = "estimated" if refiner.timing_estimator is not None else "flagged"
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
