@@ -122,6 +122,8 @@ def test_bench_samples_quick(tmp_path):
     assert 0.0 <= rec["refined"]["accuracy"] <= 1.0 and rec["frames_changed"] == 1.0
     assert len(rec["reports"]) == 5 and all(r["changes"][0]["step"] == "skeleton" for r in rec["reports"])
     assert all("median bone lengths" in r["changes"][0]["reason"] for r in rec["reports"])
+    assert all([c["step"] for c in r["changes"]].count("texture") == 1 for r in rec["reports"])  # generated: every clip
+    assert 0.0 <= rec["repaired_frames"] < 1.0  # the whole-clip steps (skeleton, texture) are not repairs
     snapped = rec["snapped"]  # the concept-snap option moves every clip (all have their labels) and keeps bones rigid
     assert snapped["frames_changed"] > 0.9 and snapped["bone_length_variation"] < 0.01
     assert 0.0 <= snapped["accuracy"] <= 1.0

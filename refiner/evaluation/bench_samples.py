@@ -2,7 +2,8 @@
 
 The real Action2Motion xyz-VAE samples in ``../shared/samples/action2motion`` (20 clips of 60
 frames with their labels) are converted by the ``action2motion`` adapter, refined with their
-labels by the subject-1-10 weights, and scored: the HumanAct12 recogniser's accuracy (mean over
+labels by the subject-1-10 weights as :class:`~refiner.refinement.refined_generator.RefinedGenerator` refines
+(``texture="all"``), and scored: the HumanAct12 recogniser's accuracy (mean over
 20 random GRU hidden states, the Action2Motion protocol), bone-length variation, frames changed,
 and what each clip's report says changed and why.
 
@@ -46,10 +47,19 @@ def sample_records(before, labels, recognizer, refiner, *, n_hidden: int = 20, a
     out["frames_changed"] = float(np.mean([c.mean() for c in changed]))
     steps = Counter(c["step"] for r in reports for c in r.changes)
     out["changes_by_step"] = dict(steps)
-    out["repaired_frames"] = float(np.mean([sum(c["stop"] - c["start"] for c in r.changes if c["step"] != "skeleton")
-                                            / r.n_frames for r in reports]))
+    out["repaired_frames"] = float(np.mean([_repaired(r).mean() for r in reports]))
     out["reports"] = [{"label": int(a), "changes": r.changes} for a, r in zip(labels, reports)]
     return out
+
+
+def _repaired(report) -> np.ndarray:
+    """``(T,)`` bool: the frames of a report's changes but for the steps that take every frame of a clip (rigid
+    skeleton, texture filter); frames two changes share count once."""
+    frames = np.zeros(report.n_frames, bool)
+    for c in report.changes:
+        if c["step"] not in ("skeleton", "texture"):
+            frames[c["start"]:c["stop"]] = True
+    return frames
 
 
 def bench_samples(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
@@ -68,9 +78,10 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool, *, progress:
     before = convert("action2motion", np.load(path), representation="xyz", recenter=True)
     if quick:
         before, labels = before[:5], labels[:5]
-    refiner = Refiner.pretrained("humanact12", split="train")
+    # generator output, refined as RefinedGenerator refines it: every clip through the texture filter
+    refiner = Refiner.pretrained("humanact12", split="train", texture="all")
     rec = sample_records(before, labels, recognizer, refiner, n_hidden=5 if quick else 20)
-    snapper = Refiner.pretrained("humanact12", split="train", concept_snap=1.0)
+    snapper = Refiner.pretrained("humanact12", split="train", texture="all", concept_snap=1.0)
     snapped = sample_records(before, labels, recognizer, snapper, n_hidden=5 if quick else 20)
     rec["snapped"] = {**snapped["refined"], "frames_changed": snapped["frames_changed"]}
     ntu = _ntu13_records(data, folder, quick)
@@ -99,7 +110,7 @@ def _ntu13_records(data, folder: Path, quick: bool):
     before = convert("action2motion", np.load(path), representation="xyz", recenter=True, skeleton="uestc")
     if quick:
         before, labels = before[:5], labels[:5]
-    rec = sample_records(before, labels, recognizer, Refiner.pretrained("uestc", split="train"),
+    rec = sample_records(before, labels, recognizer, Refiner.pretrained("uestc", split="train", texture="all"),
                          n_hidden=5 if quick else 20, actions=[None] * len(before))
     rec["clips"] = len(before)
     return rec
