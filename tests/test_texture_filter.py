@@ -103,3 +103,22 @@ def test_shipped_filter_takes_noise_off_held_out_clips_and_only_generated_ones_b
     out, reports = generated.refine(rough[:2], return_report=True)
     assert all([c["step"] for c in r.changes].count("texture") == 1 for r in reports)
     assert bone_lengths(out, "humanact12").std(1).max() < 1e-4  # back on rigid bones after the filter
+
+
+@pytest.mark.real_data
+def test_rotation_jitter_keeps_bones_and_carries_each_turn_down_the_limb(humanact12):
+    """The ``rotation_share`` option's corruption: bone lengths exact, the root still, hands moved more than hips."""
+    from refiner.refinement.texture_filter import _turned_bones
+
+    x = np.stack([m.joints[:20] for m in humanact12.motions[:4]]).astype(np.float64)
+    y = _turned_bones(x, np.full((4, 1, 1, 1), 0.02), "humanact12", np.random.default_rng(0))
+    np.testing.assert_allclose(bone_lengths(y, "humanact12"), bone_lengths(x, "humanact12"), atol=1e-9)
+    move = np.linalg.norm(y - x, axis=-1).mean((0, 1))  # (J,) metres
+    assert move[0] == 0 and move[[22, 23]].mean() > 4 * move[[1, 2]].mean()  # hands against hips
+    assert np.array_equal(_turned_bones(x, np.zeros((4, 1, 1, 1)), "humanact12", np.random.default_rng(0)), x)
+    spoiled = TextureFilter(rotation_share=1.0, clean_probability=0.0)
+    spoiled.skeleton_ = "humanact12"
+    z = spoiled._rough(x.astype(np.float32), np.random.default_rng(1))
+    np.testing.assert_allclose(bone_lengths(z, "humanact12"), bone_lengths(x, "humanact12"), atol=1e-5)
+    with pytest.raises(ValueError, match="rotation_share"):
+        TextureFilter(rotation_share=1.5, schedule=TINY).fit([m.joints for m in humanact12.motions[:3]])

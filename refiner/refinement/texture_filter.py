@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from refiner.core.rotations import rotvec_to_rotmat
 from refiner.core.skeletons import get_skeleton, rigid_skeleton
 from refiner.core.validation import check_is_fitted, check_joint_batch, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
@@ -88,6 +89,11 @@ class TextureFilter(NetworkComponent):
         Metres: the largest standard deviation of the white noise given to training crops.
     clean_probability : float, default=0.2
         Share of training crops left clean.
+    rotation_share : float, default=0.0
+        Share of the spoiled training crops given jitter of their bones' directions instead of white noise of the
+        joints (a generator that decodes rotations jitters so: a turned bone carries its whole limb along).
+    max_rotation : float, default=0.02
+        Radians: the largest standard deviation of that jitter, per axis and frame.
     crop : int, default=48
         Training crop length.
     passes : int, default=2
@@ -109,8 +115,8 @@ class TextureFilter(NetworkComponent):
     _fitted_attributes = ("skeleton_", "n_joints_", "history_")
 
     def __init__(self, *, channels: int = 96, kernel: int = 5, dilations: tuple = (1, 2, 4, 2, 1),
-                 max_noise: float = 0.03, clean_probability: float = 0.2, crop: int = 48, passes: int = 2,
-                 max_correction: float = 0.1,
+                 max_noise: float = 0.03, clean_probability: float = 0.2, rotation_share: float = 0.0,
+                 max_rotation: float = 0.02, crop: int = 48, passes: int = 2, max_correction: float = 0.1,
                  schedule: TrainSchedule = TrainSchedule(n_epochs=24, batch_size=64, learning_rate=1e-3, patience=24,
                                                          steps_per_epoch=500),
                  random_state: int | None = 0):
@@ -119,6 +125,8 @@ class TextureFilter(NetworkComponent):
         self.dilations = dilations
         self.max_noise = max_noise
         self.clean_probability = clean_probability
+        self.rotation_share = rotation_share
+        self.max_rotation = max_rotation
         self.crop = crop
         self.passes = passes
         self.max_correction = max_correction
@@ -130,13 +138,19 @@ class TextureFilter(NetworkComponent):
                                 tuple(self.dilations))
 
     def _rough(self, crops: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Crops ``(N, L, J, 3)`` with white noise of a random level over the crop or a random window of it."""
+        """Crops ``(N, L, J, 3)`` with white noise of a random level over the crop or a random window of it: of the
+        joints, or (``rotation_share`` of the crops) of their bones' directions."""
         n, length = crops.shape[:2]
-        level = rng.uniform(0.0, self.max_noise, (n, 1, 1, 1)) * (rng.random((n, 1, 1, 1)) >= self.clean_probability)
+        spoiled = rng.random((n, 1, 1, 1)) >= self.clean_probability
+        level = rng.uniform(0.0, 1.0, (n, 1, 1, 1)) * spoiled
         start, span = rng.uniform(-0.5, 1.0, (n, 1)) * length, rng.uniform(5, 2 * length, (n, 1))
         ramp = np.sin(np.pi * np.clip((np.arange(length) - start) / span, 0, 1))
         ramp = np.where(rng.random((n, 1)) < 0.5, ramp, 1.0)[..., None, None]
-        return (crops + level * ramp * rng.normal(size=crops.shape)).astype(np.float32)
+        out = crops + self.max_noise * level * ramp * rng.normal(size=crops.shape)
+        turned = rng.random(n) < self.rotation_share
+        if turned.any():
+            out[turned] = _turned_bones(crops[turned], self.max_rotation * level[turned] * ramp[turned], self.skeleton_, rng)
+        return out.astype(np.float32)
 
     def fit(self, clips, *, skeleton: str = "humanact12", validation=None, checkpoint=None) -> "TextureFilter":
         """Train on real clips ``(T_i, J, 3)`` metres (T_i >= 2); ``validation``: held-out clips."""
@@ -145,8 +159,9 @@ class TextureFilter(NetworkComponent):
         if not clips or any(c.ndim != 3 or c.shape[-1] != 3 or len(c) < 2 for c in clips):
             raise ValueError("`clips` must be a non-empty list of (T >= 2, J, 3) arrays.")
         if (not 0 <= self.clean_probability < 1 or self.max_noise <= 0 or self.crop < 2 or int(self.passes) < 1
-                or self.max_correction <= 0):
-            raise ValueError("need 0 <= clean_probability < 1, max_noise > 0, crop >= 2, passes >= 1 and max_correction > 0.")
+                or self.max_correction <= 0 or not 0 <= self.rotation_share <= 1 or self.max_rotation < 0):
+            raise ValueError("need 0 <= clean_probability < 1, max_noise > 0, crop >= 2, passes >= 1, max_correction > 0, "
+                             "0 <= rotation_share <= 1 and max_rotation >= 0.")
         self.skeleton_ = get_skeleton(skeleton).name
         self.n_joints_ = int(clips[0].shape[1])
         self._fit_on_crops(clips, validation, self._rough, _loss, rng, checkpoint=checkpoint, desc="texture filter")
@@ -163,6 +178,21 @@ class TextureFilter(NetworkComponent):
             size = step.norm(dim=-1, keepdim=True)
             x = x + step * (self.max_correction / size.clamp_min(self.max_correction))
         return x.cpu().numpy().astype(np.float32)
+
+
+def _turned_bones(joints: np.ndarray, sigma: np.ndarray, skeleton: str, rng: np.random.Generator) -> np.ndarray:
+    """Joints ``(N, L, J, 3)`` metres rebuilt from the root outward with every joint's rotation jittered by a random
+    turn of ``sigma`` (broadcast to ``(N, L, 1, 1)``) radians per axis, as a generator of local rotations jitters:
+    bone lengths kept, each turn carried to the joint's whole subtree."""
+    parents = get_skeleton(skeleton).parents
+    turns = rotvec_to_rotmat(sigma * rng.normal(size=joints.shape))  # (N, L, J, 3, 3)
+    carried = turns.copy()  # each joint's turn composed with its ancestors'
+    out = joints.copy()
+    for j, p in enumerate(parents):
+        if p >= 0:  # parents come before their children
+            carried[:, :, j] = carried[:, :, p] @ turns[:, :, j]
+            out[:, :, j] = out[:, :, p] + np.einsum("nlab,nlb->nla", carried[:, :, p], joints[:, :, j] - joints[:, :, p])
+    return out
 
 
 def _loss(net, batch, rng) -> torch.Tensor:
