@@ -279,22 +279,25 @@ def drifting_skeleton(joints: np.ndarray, skeleton: str, tolerance: float = 0.00
 
 
 def prior_posed(refiner, clips: np.ndarray, reports: list, drifting: np.ndarray,
-                noisy: np.ndarray | None = None) -> np.ndarray:
+                noisy: np.ndarray | None = None, *, generated: np.ndarray | None = None) -> np.ndarray:
     """The pose-prior step, last: in the ``drifting (B,)`` clips of ``clips (B, T, J, 3)`` (:func:`drifting_skeleton`
     of the input), the frames the refiner's ``pose_prior`` would move further than ``threshold_`` corrected
     (:meth:`PosePrior.posed`), in the ``noisy (B,)`` ones (found noisy throughout by the noise step: a generator's
-    texture) those it would move further than ``texture_threshold_``; then every frame put on the lengths of the
+    texture) those it would move further than ``texture_threshold_``, in the ``generated (B,)`` ones (known to be a
+    generator's, after the texture filter) at ``threshold_`` as drifting ones; then every frame put on the lengths of the
     corrected clip (the medians of all its frames, drawn toward the refiner's bone proportions where it uses them):
     the prior's poses hold truer lengths than drifted ones. Like the other steps that judge a clip as a whole (rigid
     skeleton, amplitude, noise throughout) it runs in every mode: a drift covers anchors and transitions alike. One
     report entry (step ``"pose"``) per run of corrected frames, one ``"skeleton"`` entry for the frames the refit moved."""
     prior = getattr(refiner, "pose_prior", None)
     drifting = np.asarray(drifting, bool)
-    noisy = np.zeros_like(drifting) if noisy is None else np.asarray(noisy, bool) & ~drifting
-    todo = np.flatnonzero(drifting | noisy)
+    generated = np.zeros_like(drifting) if generated is None else np.asarray(generated, bool) & ~drifting
+    strict = drifting | generated
+    noisy = np.zeros_like(drifting) if noisy is None else np.asarray(noisy, bool) & ~strict
+    todo = np.flatnonzero(strict | noisy)
     if prior is None or getattr(refiner, "posing", "prior") != "prior" or not todo.size:
         return clips
-    threshold = np.where(drifting[todo], prior.threshold_, prior.texture_threshold_)
+    threshold = np.where(strict[todo], prior.threshold_, prior.texture_threshold_)
     posed, level = prior.posed(clips[todo], threshold)
     out = clips.copy()
     proportions = refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None
@@ -306,6 +309,7 @@ def prior_posed(refiner, clips: np.ndarray, reports: list, drifting: np.ndarray,
         y = np.where(keep[:, None, None], posed[k], clips[b])
         out[b] = rigid_skeleton(y, refiner.skeleton, 0.0, proportions=proportions)[0]
         why = ("the skeleton deforms slowly throughout (drifting joints)" if drifting[b] else
+               "the clip is a generator's (texture='all'), after the texture filter" if generated[b] else
                "the clip is noisy throughout (a generator's texture)")
         refit = (out[b] != clips[b]).reshape(len(keep), -1).any(-1) & ~keep
         if refit.any():  # the new lengths move the other frames too

@@ -7,9 +7,11 @@ turned to its mean heading and centred on its mean, through dilated residual 1-D
 field 41 frames, 2 s at 20 fps; 0.27 M parameters, 0.55 MB a weight set) and returns a correction of every
 frame; :class:`TextureFilter` trains it on real clips given white noise of a random, unknown level (over
 the crop or a window of it, or none), so it learns what real motion looks like under any roughness (12,000
-steps, 28 minutes on one CPU core). The step (:func:`filtered_texture`, last) applies it twice, then the
+steps, 28 minutes on one CPU core). The step (:func:`filtered_texture`, last) applies it three times, then the
 noise filter (the passes leave some roughness of their own), then puts the clip back on rigid bones (the
-network bends them: 8.5 % bone-length variation on a2m's clips).
+network bends them: 8.5 % bone-length variation on a2m's clips), then, on clips known to be a generator's,
+the pose prior (:func:`~refiner.refinement.pose_prior.prior_posed`) at the drift threshold: the frames it would
+move further than half of held-out clean frames.
 
 It cannot tell a person it never saw from a rough clip (on clean held-out clips it moves joints 0.37 cm,
 against the 0.3 cm the refiner may move them), so it runs where the clip is known or found to be a
@@ -22,10 +24,13 @@ noise step's level above 0 or above real clips' 90th percentile, or acceleration
 actor's FID at 4.22-4.26 but gave back most of a2m-large's and mdm's gain (1.030-1.050, 1.336-1.339).
 Chosen on 600 samples per reference
 generator drawn with seeds the benchmark does not use (5 replications; FID after the rest of the refiner
--> with it): a2m 3.966 -> 3.573 (generated 4.461; acceleration 16.9 -> 13.1 m/s², accuracy 41.2 -> 42.2 %),
-a2m-large 1.076 -> 1.022, mdm 1.337 -> 1.321, actor-large 1.056 -> 1.055, actor 4.209 -> 4.278 (worse: its
-clips are smoother than mocap); one pass 3.675, three 3.418 (bones 0.03 %), four 3.267 but acceleration
-25 m/s², six run away (README, table of choices).
+-> with two passes): a2m 3.966 -> 3.573 (generated 4.461; acceleration 16.9 -> 13.1 m/s², accuracy 41.2 ->
+42.2 %), a2m-large 1.076 -> 1.022, mdm 1.337 -> 1.321, actor-large 1.056 -> 1.055, actor 4.209 -> 4.278
+(worse: its clips are smoother than mocap); three passes: a2m 3.492, a2m-large 1.011, the others within
+0.5 %; three and the pose prior after them: a2m 3.393, a2m-large 1.006, actor 4.288 (the prior twice: 3.361;
+before the texture filter it could not be run on every clip: about half the frames of every clean clip
+move). Uncapped passes: one 3.675, three 3.418, four 3.267 but acceleration 25 m/s², six run away (README,
+table of choices).
 """
 from __future__ import annotations
 
@@ -39,7 +44,7 @@ from refiner.core.skeletons import get_skeleton, rigid_skeleton
 from refiner.core.validation import check_is_fitted, check_joint_batch, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.training import TrainSchedule
-from refiner.refinement.pose_prior import body_frame
+from refiner.refinement.pose_prior import body_frame, prior_posed
 
 __all__ = ["TextureFilter", "TextureFilterNet", "filtered_texture", "TEXTURE"]
 
@@ -96,7 +101,7 @@ class TextureFilter(NetworkComponent):
         Radians: the largest standard deviation of that jitter, per axis and frame.
     crop : int, default=48
         Training crop length.
-    passes : int, default=2
+    passes : int, default=3
         Times :meth:`filtered` applies the network (each pass takes part of the texture off; more than three passes
         run away from real motion).
     max_correction : float, default=0.1
@@ -116,7 +121,7 @@ class TextureFilter(NetworkComponent):
 
     def __init__(self, *, channels: int = 96, kernel: int = 5, dilations: tuple = (1, 2, 4, 2, 1),
                  max_noise: float = 0.03, clean_probability: float = 0.2, rotation_share: float = 0.0,
-                 max_rotation: float = 0.02, crop: int = 48, passes: int = 2, max_correction: float = 0.1,
+                 max_rotation: float = 0.02, crop: int = 48, passes: int = 3, max_correction: float = 0.1,
                  schedule: TrainSchedule = TrainSchedule(n_epochs=24, batch_size=64, learning_rate=1e-3, patience=24,
                                                          steps_per_epoch=500),
                  random_state: int | None = 0):
@@ -225,4 +230,6 @@ def filtered_texture(refiner, clips: np.ndarray, reports: list, noisy: np.ndarra
                                    "reason": f"{why}: every frame filtered by the texture filter ({int(part.passes)} "
                                              f"passes{', then the noise filter' if noise is not None else ''}) and put "
                                              f"back on rigid bones (moved {moved:.2f} cm on average)"})
+    if texture == "all":  # known to be a generator's: the poses the filter left off real motion, as a drift's
+        out = prior_posed(refiner, out, reports, np.zeros(len(out), bool), generated=todo)
     return out
