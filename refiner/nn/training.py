@@ -110,8 +110,7 @@ def random_crops(clips: Sequence[np.ndarray], length: int, n: int, rng: np.rando
     out = np.zeros((n, length, *np.shape(clips[0])[1:]), np.float32)
     for k, i in enumerate(rng.integers(len(clips), size=n)):
         s = crop_start(len(clips[i]), length, rng)
-        part = clips[i][s : s + length]
-        out[k, : len(part)], out[k, len(part) :] = part, part[-1]
+        put_crop(out, k, clips[i][s : s + length], 0.0)
     return out
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["MODES", "METHODS", "RIGID_LENGTHS", "RETIMING", "DENOISING", "AMPLITUDE", "POSING", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_metres",
+__all__ = ["MODES", "METHODS", "RIGID_LENGTHS", "RETIMING", "DENOISING", "AMPLITUDE", "POSING", "TEXTURE", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_metres",
            "check_metres_each", "check_threads", "thread_limits"]
 
 #: Which refinement steps run after recognition.
@@ -28,6 +28,9 @@ DENOISING = ("filter", "throughout", "flagged")
 AMPLITUDE = ("restore", "keep")
 #: Poses off real motion: corrected by the pose prior (``"prior"``) or kept (``"keep"``).
 POSING = ("prior", "keep")
+#: Clips the texture filter runs on: those the noise step finds noisy throughout (``"auto"``), every clip
+#: (``"all"``: the clips are a generator's), none (``"off"``).
+TEXTURE = ("auto", "all", "off")
 #: Shortest clip refined; shorter ones pass through unchanged (reported).
 MIN_FRAMES = 8
 #: ``threads="auto"`` uses more than one thread from this many clips in a batch on.

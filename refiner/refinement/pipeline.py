@@ -34,12 +34,12 @@ from refiner.refinement.converted_refinement import ConvertedRefiner, converts_w
 from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.infilling import MotionInfiller
-from refiner.refinement.inputs import (AMPLITUDE, DENOISING, METHODS, MODES, POSING, RETIMING, RIGID_LENGTHS,
+from refiner.refinement.inputs import (AMPLITUDE, DENOISING, METHODS, MODES, POSING, RETIMING, RIGID_LENGTHS, TEXTURE,
                                        auto_threads, check_choice, check_choices, check_metres, check_metres_each, check_threads, thread_limits)
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pose_prior import PosePrior
-from refiner.refinement.texture_filter import TEXTURE, TextureFilter
+from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.report import RefinementReport
 from refiner.refinement.splicing import project_bone_lengths, splice
 from refiner.refinement.transition_refinement import TransitionRefiner

@@ -173,7 +173,6 @@ class PosePrior(NetworkComponent):
             flawed = rigid_skeleton(flawed, self.skeleton_, self.rigid_tolerance, iterations=30)[0]  # enough for training
         return flawed.astype(np.float32)
 
-
     def fit(self, clips, *, skeleton: str = "humanact12", validation=None, checkpoint=None) -> "PosePrior":
         """Train on real clips ``(T_i, J, 3)`` metres (T_i >= 2); ``validation``: held-out clips."""
         rng = check_random_state(self.random_state)

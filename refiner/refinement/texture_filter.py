@@ -46,11 +46,8 @@ from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.training import TrainSchedule
 from refiner.refinement.pose_prior import body_frame, prior_posed
 
-__all__ = ["TextureFilter", "TextureFilterNet", "filtered_texture", "TEXTURE"]
+__all__ = ["TextureFilter", "TextureFilterNet", "filtered_texture"]
 
-#: Clips the texture filter runs on: those the noise step finds noisy throughout (``"auto"``), every clip
-#: (``"all"``: the clips are a generator's), none (``"off"``).
-TEXTURE = ("auto", "all", "off")
 #: Coordinates are fed and read at this many times metres (decimetres: unit-sized inputs).
 _SCALE = 10.0
 
