@@ -56,7 +56,7 @@ def test_quick_demo_writes_every_file(demo_run):
         with Image.open(out / f"{stem}.gif") as gif:
             assert gif.n_frames == 24  # the quick animation shows the first 24 frames
         with Image.open(out / f"{stem}_keyframes.png") as png:
-            assert png.size[0] > 2 * png.size[1]  # a strip: two rows, six or more columns
+            assert 2 * png.size[1] < png.size[0] < 10 * png.size[1]  # a strip: two rows, 6 to 12 columns
     summary = json.loads((out / "summary.json").read_text())
     assert [r["action_name"] for r in summary["rows"]] == ["walk", "boxing"]
     for row in summary["rows"]:
@@ -106,6 +106,15 @@ def test_demo_rejects_unknown_generator_and_action(tmp_path):
         run_demo(tmp_path, generator="no_such_kind")
 
 
+def test_strip_shows_even_frames_and_one_per_flagged_run():
+    from refiner.cli.demo import strip_frames
+
+    np.testing.assert_array_equal(strip_frames(60, [], 4), [0, 20, 39, 59])
+    np.testing.assert_array_equal(strip_frames(60, [30, 31, 32, 50], 4), [0, 20, 31, 39, 50, 59])
+    assert len(strip_frames(60, np.arange(60), 8)) == 9  # a clip changed throughout: one run, its middle frame
+    np.testing.assert_array_equal(strip_frames(60, np.arange(0, 60, 2), 4), [0, 2, 4, 6, 20, 39, 59])  # 30 runs: 4
+
+
 def test_summary_row_says_total_for_counts_and_mean_for_confidence():
     from refiner.cli.demo import DemoRow, format_table
 
@@ -133,4 +142,3 @@ def test_demo_refuses_to_overwrite_its_files_without_force(demo_run, tmp_path, c
         run_demo(tmp_path, actions=["jump"], quick=True, mp4=False)
     result = run_demo(tmp_path, actions=["jump"], quick=True, mp4=False, overwrite=True)
     assert (tmp_path / "03_jump.gif").stat().st_size > 1000 and result.rows[0].action_name == "jump"
-    assert run_demo(tmp_path / "new", actions=["jump"], quick=True, mp4=False).rows  # a fresh folder needs no force

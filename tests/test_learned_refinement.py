@@ -129,6 +129,9 @@ def test_untrained_repair_is_identity_or_linear_infill(rng):
     line = linear_infill(np.arange(10, dtype=np.float32)[:, None, None].repeat(2, 1).repeat(3, 2),
                          np.array([0, 0, 1, 1, 1, 0, 0, 0, 1, 1], bool))
     np.testing.assert_allclose(line[:, 0, 0], [0, 1, 2, 3, 4, 5, 6, 7, 7, 7])
+    x = np.array([5.0, 9, 1, 3, 9, 4, 7])[:, None, None]  # a hidden first frame is held at the first kept one
+    np.testing.assert_allclose(linear_infill(x, np.array([1, 0, 1, 0, 1, 1, 0], bool))[:, 0, 0],
+                               [9, 9, 6, 3, 3 + 4 / 3, 3 + 8 / 3, 7])
 
 
 def test_flag_runs_and_windows():

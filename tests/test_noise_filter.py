@@ -18,7 +18,7 @@ def _error(y, x):
 
 @pytest.fixture(scope="module")
 def fitted(humanact12):
-    train = [m.joints for m in humanact12.motions[:900:6]]
+    train = [m.joints for m in humanact12.motions[:900:10]]
     held = [m.joints for m in humanact12.motions[900:1190:5]]
     return NoiseFilter(copies=1).fit(train), held
 

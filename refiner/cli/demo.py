@@ -25,6 +25,7 @@ from refiner.cli.options import (GENERATOR_NAMES, GIF_DPI, GIF_PANEL_PX, gif_siz
 from refiner.core.validation import check_action
 from refiner.io.datasets import HUMANACT12_ACTIONS
 from refiner.plugins.manager import get_plugin_manager
+from refiner.refinement.learned_pipeline import flag_runs
 from refiner.refinement.refined_generator import RefinedGenerator
 
 __all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table", "demo_arguments",
@@ -273,8 +274,8 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
     animations = viz.animate(anim_before, anim_after, flagged=anim_flags, path=out / f"{stem}.gif",
                              labels=("generated", "refined"), mp4=mp4, **gif)
     action = stem.split("_", 1)[1].replace("_", " ")
-    viz.keyframe_strip([before, after], flagged=flagged, path=out / f"{stem}_keyframes.png",
-                       labels=("generated", "refined"), n_keyframes=6 if n_frames else 8,
+    viz.keyframe_strip([before, after], strip_frames(before.n_frames, flagged, 6 if n_frames else 8), flagged=flagged,
+                       path=out / f"{stem}_keyframes.png", labels=("generated", "refined"),
                        title=f"{action}: key frames, generated (top) and refined (bottom)")
     # Name each plotted threshold by its quantity: the report's own `threshold` is, for the concepts
     # method, a pose-score threshold (report.threshold_quantity), not this anchor-probability one.
@@ -291,6 +292,17 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
     names += [f"{stem}_keyframes.png", f"{stem}_scores.png", f"{stem}_before.npy", f"{stem}_after.npy",
               f"{stem}_report.json"]
     return names
+
+
+def strip_frames(n_frames: int, flagged, n_keyframes: int) -> np.ndarray:
+    """Frames a key-frame strip shows: ``n_keyframes`` evenly spaced ones and the middle frame of each of the
+    first ``n_keyframes`` runs of ``flagged`` frames. Not every flagged frame: a generator's clip is often changed
+    throughout (its noise, the pose prior), and a strip of 60 panels shows nothing."""
+    mask = np.zeros(n_frames, bool)
+    mask[np.asarray(flagged, int)] = True
+    middles = [(a + b - 1) // 2 for a, b in flag_runs(mask.astype(np.float64), 0.5, min_run=1, margin=0)]
+    even = np.round(np.linspace(0, n_frames - 1, min(n_keyframes, n_frames))).astype(int)
+    return np.union1d(even, np.asarray(middles[:n_keyframes], int))
 
 
 def _existing_outputs(out: Path, stems: Sequence[str]) -> list[str]:

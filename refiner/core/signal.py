@@ -28,11 +28,12 @@ def linear_infill(x: np.ndarray, hide: np.ndarray) -> np.ndarray:
     if keep.size == 0 or keep.size == len(x):
         return x.copy()
     t = np.arange(len(x))
-    flat = x.reshape(len(x), -1)
-    out = np.empty_like(flat)
-    for d in range(flat.shape[1]):
-        out[:, d] = np.interp(t, keep, flat[keep, d])
-    return out.reshape(x.shape).astype(x.dtype)
+    j = np.searchsorted(keep, t, side="right") - 1  # the last kept frame at or before each frame (-1: none)
+    lo, hi = keep[np.clip(j, 0, keep.size - 1)], keep[np.clip(j + 1, 0, keep.size - 1)]
+    w = np.where(hi > lo, (t - lo) / np.maximum(hi - lo, 1), 0.0).reshape(-1, *([1] * (x.ndim - 1)))
+    out = ((1.0 - w) * x[lo] + w * x[hi]).astype(x.dtype)
+    out[keep] = x[keep]  # kept frames exactly as given
+    return out
 
 
 def window_starts(n_frames: int, size: int, stride: int) -> list[int]:

@@ -163,13 +163,13 @@ class MotionDiffusionGenerator(JointsGenerator):
         HumanAct12's y-down frame, first-frame root near the origin."""
         n, dim = len(actions), net.config.n_joints * 3
         x = normal_noise(rng, (n, self.n_frames, dim), actions)
-        null = torch.full_like(actions, net.config.n_actions)
+        both = torch.cat([torch.full_like(actions, net.config.n_actions), actions])  # unconditional, conditional
         times = np.linspace(self.diffusion_steps - 1, 0, self.sampling_steps).round().astype(np.int64)
         a_bars = net.alpha_bars
         for k, t in enumerate(times):
-            tt = torch.full((n,), int(t), dtype=torch.long, device=x.device)
-            x0 = net(x, tt, null)
-            x0 = x0 + self.guidance * (net(x, tt, actions) - x0)
+            tt = torch.full((2 * n,), int(t), dtype=torch.long, device=x.device)
+            x0, cond = net(torch.cat([x, x]), tt, both).chunk(2)  # one forward pass for both halves of the guidance
+            x0 = x0 + self.guidance * (cond - x0)
             a = a_bars[t]
             eps = (x - a.sqrt() * x0) / (1 - a).sqrt().clamp_min(1e-6)
             a_next = a_bars[times[k + 1]] if k + 1 < len(times) else torch.tensor(1.0, device=x.device)

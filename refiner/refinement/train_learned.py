@@ -71,8 +71,9 @@ TEXTURE_FILTER_CONFIGS = {"default": dict(schedule=dict()),
 POSE_QUANTILE, POSE_TEXTURE_QUANTILE = 0.5, 0.95
 #: Share of held-out clean clips the amplitude step may scale: it changes whole clips.
 AMPLITUDE_CLIP_RATE = 0.005
-#: The noise filter's settings (fitted in closed form: about a minute on one CPU core) and its tiny test version.
-NOISE_FILTER_CONFIGS = {"default": {}, "tiny": dict(half_width=1, copies=1)}
+#: The noise filter's settings (fitted in closed form: about a minute on one CPU core) and its tiny test version
+#: (noisy copies not put back on rigid bones: that projection was most of a tiny training's time).
+NOISE_FILTER_CONFIGS = {"default": {}, "tiny": dict(half_width=1, copies=1, rigid_tolerance=None)}
 #: Parts trained only when asked (``only=``): the denoiser and the motion in-filler serve options of the
 #: refiner (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
 #: they are calibrated and installed with the others.
