@@ -151,8 +151,9 @@ def retrace_window(joints: np.ndarray, loop: Retrace, rush: float = 1.5, reach: 
     (T, J, 3)``: the loop grown over the frames before and after it that move faster than ``rush`` times the
     clip's median speed, at most ``reach`` each side, up to the clip's first and last frames: a motion that
     turned back had to rush ahead before it and catch up after it. Never over a step faster than ``glitch``
-    times the median (:data:`~refiner.refinement.repair_candidates.GLITCH`): a jump, which re-timing would spread over the window. (The stall repair grows its run the same
-    way, :func:`~refiner.refinement.repair_candidates.stall_window`, but over the changed frames, so that its
+    times the median (:data:`~refiner.refinement.repair_candidates.GLITCH`): a jump, which re-timing would
+    spread over the window. (The stall repair grows its run the same way,
+    :func:`~refiner.refinement.repair_candidates.stall_window`, but over the changed frames, so that its
     window never reaches the clip's ends: here that cost the calibration reversals 40.7 -> 28.3 %.)"""
     speed, median = frame_speed(joints)
     lo, hi = int(np.floor(loop.start)), int(np.ceil(loop.resume))
