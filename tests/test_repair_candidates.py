@@ -193,3 +193,7 @@ def test_stall_window_never_reaches_over_a_jump():
     a, c = stall_window(y, 17, 30)  # a window given over the jump: cut on the jump's shorter side
     assert (a, c) == (22, 30)
     assert stall_window(y, 21, 30)[0] == 22  # one that starts at it: the jump left outside (frames 21..)
+    step[23] = 1.0  # jumps on both sides of a short window leave none: the window as grown, never empty
+    y[1:, :, 0] = np.cumsum(step)[:, None]
+    assert stall_window(y, 21, 23) == (21, 23)
+    assert np.array_equal(stall_retime_run(y, 22, 23, SKEL), y)  # a window under min_frames: no change, no crash

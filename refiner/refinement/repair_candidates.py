@@ -102,8 +102,10 @@ def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall:
     speed, median = frame_speed(y)
     window = speed[max(lo - 1, 0) : hi]
     still = window < stall * median
+    if len(still) < min_frames:
+        return y.copy()
     run = np.convolve(still.astype(int), np.ones(min_frames, int), mode="valid")
-    if not run.size or run.max() < min_frames:
+    if run.max() < min_frames:
         return y.copy()
     stalled = int(np.argmax(run >= min_frames)) + min_frames  # just after the first stop
     if rush is not None and not (window[stalled:] > rush * median).any():
@@ -122,13 +124,13 @@ def stall_window(y: np.ndarray, lo: int, hi: int, *, stall: float = 0.1, rush: f
         a -= 1
     while c < min(hi + reach, len(y) - 1) and rush * median < speed[c - 1] < glitch * median:
         c += 1
-    middle = (a + c) / 2  # a jump already inside: the window ends before it (re-timed frames a-1 .. c)
+    grown, middle = (a, c), (a + c) / 2  # a jump already inside: the window ends before it (re-timed a-1 .. c)
     for k in np.flatnonzero(speed[max(a - 1, 0) : c] >= glitch * median) + max(a - 1, 0):
         if k < middle:
             a = max(a, int(k) + 2)
         else:
             c = min(c, int(k))
-    return a, c
+    return (a, c) if c - a >= 2 else grown  # jumps on both sides leave no window: as grown
 
 
 def forward_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton) -> np.ndarray:
