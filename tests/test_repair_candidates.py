@@ -175,25 +175,3 @@ def test_noise_runs_are_smoothed_where_noisier_than_their_clip(rng, local, expec
     name, _, out, note = lp._repair_run(refiner, y, 10, 20, {}, groups, y, SKEL)
     assert name == expected and np.array_equal(out, y) == (expected == "keep")
     assert expected == "smooth" or "no noisier than the rest of the clip" in note
-
-
-def test_stall_window_never_reaches_over_a_jump():
-    """A step far faster than the clip's median is a glitch, not the rush after a stall: the re-timed frames
-    (``a - 1 .. c``) stop before it, grown up to it or given with it inside."""
-    from refiner.refinement.repair_candidates import GLITCH
-
-    step = np.full(39, 0.01)
-    step[10:16], step[16:20], step[20] = 0.0, 0.03, 1.0  # a stall, the rush after it, a 1 m jump
-    y = np.zeros((40, 2, 3))
-    y[1:, :, 0] = np.cumsum(step)[:, None]
-    assert GLITCH < 1.0 / 0.01
-    a, c = stall_window(y, 14, 18)
-    assert a == 10 and c == 20  # grown over the stall and the rush, stopped at the jump (frames 9..20 re-timed)
-    assert stall_window(y, 14, 18, glitch=np.inf) == (10, 22)  # without the limit: over it
-    a, c = stall_window(y, 17, 30)  # a window given over the jump: cut on the jump's shorter side
-    assert (a, c) == (22, 30)
-    assert stall_window(y, 21, 30)[0] == 22  # one that starts at it: the jump left outside (frames 21..)
-    step[23] = 1.0  # jumps on both sides of a short window leave none: the window as grown, never empty
-    y[1:, :, 0] = np.cumsum(step)[:, None]
-    assert stall_window(y, 21, 23) == (21, 23)
-    assert np.array_equal(stall_retime_run(y, 22, 23, SKEL), y)  # a window under min_frames: no change, no crash
