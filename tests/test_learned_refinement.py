@@ -5,7 +5,7 @@ import torch
 
 from refiner.core.signal import linear_infill, run_peak, window_starts
 from refiner.core.skeletons import BoneProportions, rigid_skeleton, robust_bone_lengths
-from refiner.core.skeletons import joint_bone_lengths, with_bone_lengths
+from refiner.core.skeletons import bone_lengths, joint_bone_lengths, with_bone_lengths
 from refiner.evaluation.physics import bone_length_variation
 from refiner.refinement.flaw_networks import FlawRepairNet, FrameTransformerConfig
 from refiner.refinement import learned_pipeline
@@ -184,6 +184,35 @@ def test_rigid_skeleton_restores_stretched_bones(humanact12, rng):
     assert same is clip and v < 1e-4  # real mocap is rigid: nothing to do
 
 
+@pytest.mark.real_data
+def test_rigid_skeleton_keeps_a_clips_rigid_core(humanact12, rng):
+    """A mocap clip edited in places keeps its exact frames and its blended (shortened) ones; a stretched bone
+    is put back on the core's lengths, and a clip whose bones stretch everywhere has no core."""
+    from refiner.core.rigid import rigid_core
+
+    clip = humanact12[20].joints[:60].astype(np.float64)
+    edited = clip.copy()
+    edited[10:20] = 0.5 * clip[10:20] + 0.5 * clip[40:50]  # halfway toward another phase: bones shorten
+    lengths = joint_bone_lengths(clip, "humanact12")
+    grow = np.ones_like(lengths)
+    grow[30:36, 18:] = 1.1  # six frames with forearms and hands 10 % too long
+    edited = with_bone_lengths(edited, joint_bone_lengths(edited, "humanact12") * grow, "humanact12")
+    core = rigid_core(bone_lengths(edited, "humanact12"))
+    assert core is not None and core[:10].all() and core[36:].all() and not core[30:36].any()
+    kept, variation = rigid_skeleton(edited, "humanact12", 0.005, keep_core=True)
+    assert variation > 0.005
+    moved = (kept != edited).any((1, 2))
+    assert not moved[:30].any() and moved[30:36].all() and not moved[36:].any()  # the core and the blend as given
+    np.testing.assert_allclose(bone_lengths(kept[30:36], "humanact12"), bone_lengths(clip[30:36], "humanact12"), rtol=2e-3)
+    assert (rigid_skeleton(edited, "humanact12", 0.005)[0] != edited).any((1, 2)).sum() > 50  # the old step: nearly all
+    stretched = with_bone_lengths(clip, lengths * rng.uniform(0.9, 1.1, size=lengths.shape), "humanact12")
+    assert rigid_core(bone_lengths(stretched, "humanact12")) is None
+    np.testing.assert_array_equal(rigid_skeleton(stretched, "humanact12", 0.005, keep_core=True)[0],
+                                  rigid_skeleton(stretched, "humanact12", 0.005)[0])
+    with pytest.raises(ValueError, match="T, n_bones"):
+        rigid_core(bone_lengths(clip[None], "humanact12"))
+
+
 def test_robust_bone_lengths_trust_noise_and_doubt_drift(rng):
     """A bone whose length is noisy keeps its median; one whose length drifts slowly is drawn to its share."""
     prop = BoneProportions(np.array([0.5, 0.3, 0.2]), np.array([0.01, 0.01, 0.01]))
@@ -231,6 +260,9 @@ def test_shipped_weights_know_bone_proportions():
     assert Refiner.pretrained("humanact12", split="train", rigid_lengths="median").rigid_lengths == "median"
     with pytest.raises(ValueError, match="rigid_lengths"):
         Refiner.pretrained("humanact12", split="train", rigid_lengths="mean")
+    assert model.rigid_core and not Refiner.pretrained("humanact12", split="train", rigid_core=False).rigid_core
+    with pytest.raises(ValueError, match="rigid_core"):
+        Refiner.pretrained("humanact12", split="train", rigid_core="yes")
     record = model.bone_proportions.to_dict()
     for bad in ({"mean": record["mean"]}, {"mean": record["mean"][:5], "spread": record["spread"]},
                 {"mean": [float("nan")] + record["mean"][1:], "spread": record["spread"]}):

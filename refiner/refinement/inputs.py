@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["MODES", "METHODS", "RIGID_LENGTHS", "RETIMING", "DENOISING", "AMPLITUDE", "POSING", "TEXTURE", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_metres",
+__all__ = ["MODES", "METHODS", "RIGID_LENGTHS", "RETIMING", "DENOISING", "AMPLITUDE", "POSING", "TEXTURE", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_flag", "check_metres",
            "check_metres_each", "check_threads", "thread_limits"]
 
 #: Which refinement steps run after recognition.
@@ -42,6 +42,13 @@ def check_choice(name: str, value: str, choices) -> str:
     if value not in choices:
         raise ValueError(f"unknown {name} {value!r}; known: {', '.join(choices)}.")
     return value
+
+
+def check_flag(name: str, value) -> bool:
+    """``value`` as a bool if it is one (numpy's too), else a ``ValueError`` naming the option."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"`{name}` must be True or False; got {value!r}.")
+    return bool(value)
 
 
 def check_choices(name: str, values, choices) -> frozenset:

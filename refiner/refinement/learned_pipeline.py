@@ -1,8 +1,9 @@
 """Refinement with the learned steps (``method="learned"``, the default): recognise, repair, splice, make rigid.
 
 0. **Rigid skeleton**, first: where a clip's bones vary in length more than mocap's
-   (``rigid_tolerance``, coefficient of variation; real HumanAct12 clips: under 0.001 %), every frame
-   is put back on the clip's median bone lengths, so the detectors judge the motion, not the bones.
+   (``rigid_tolerance``, coefficient of variation; real HumanAct12 clips: under 0.001 %), its frames are put
+   back on the clip's median bone lengths (with ``rigid_core``, a mocap clip edited in places keeps its exact
+   frames and those whose bones only shorten), so the detectors judge the motion, not the bones.
 1. **Recognition**: per-frame flaw probability from the kinematic flaw classifier
    (:class:`~refiner.refinement.flaw_classifier.FlawClassifier`, the default detector), anchor probability and
    the action from the recognition network (:class:`~refiner.refinement.learned_refinement.FlawRecognizer`,
@@ -38,7 +39,7 @@ from refiner.refinement.noise_filter import filtered_noise
 from refiner.refinement.pose_prior import drifting_skeleton, prior_posed
 from refiner.refinement.timing_estimation import estimated_retiming
 from refiner.refinement.texture_filter import filtered_texture
-from refiner.refinement.report import RefinementReport, start_reports
+from refiner.refinement.report import RefinementReport, repair_words, start_reports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
 from refiner.refinement.training_flaws import GROUPS
 
@@ -169,28 +170,6 @@ def flag_runs(prob: np.ndarray, threshold: float, *, min_run: int = 2, margin: i
     return [(a, b) for a, b in out]
 
 
-_HOW = {
-    "network": "corrected from the given frames and context by the repair network",
-    "network_infill": "in-filled from the context by the repair network",
-    "denoise": "corrected from the given frames by the denoising network",
-    "motion_infill": "in-filled from the context by the motion in-filler",
-    "retime": "re-timed along its own path with a smooth speed",
-    "stall_retime": "re-timed along its own path with a smooth speed where it stalls",
-    "forward_retime": "replayed forward only along its progress to the next kept pose",
-    "smooth": "smoothed in time",
-    "noise_filter": "denoised by the learned noise filter at its estimated noise level",
-    "root_infill": "root path in-filled, poses kept",
-    "spline": "smoothed in time by a smoothing spline fitted to it (smoothness by cross-validation)",
-    "planted_feet": "whole body moved back by the slip of the feet planted on the ground",
-}
-
-
-def _how(name: str) -> str:
-    """What a repair named like ``"network+planted_feet (widened by 4)"`` did, in words."""
-    base = name.split(" (")[0]
-    return ", then ".join(_HOW[part] for part in base.split("+")) + name[len(base):]
-
-
 def _select(refiner, y, spliced: dict, lo: int, hi: int) -> tuple[str, str]:
     """The candidate the flaw classifier finds most real around ``[lo, hi)``, with a small price per
     centimetre moved (``refiner.change_penalty``); "keep" (no change) is a candidate too."""
@@ -279,16 +258,18 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
     clips = clips.copy()
     prior = refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None
-    rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior)
+    rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior,
+                                       keep_core=refiner.rigid_core)
     drifting = drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, variation=variations)  # the input's bones
-    lengths = ("the clip's median bone lengths" if prior is None else
-               "the clip's median bone lengths, drawn toward human proportions where they drift")
+    lengths = "the clip's median bone lengths" + ("" if prior is None else ", drawn toward human proportions where they drift")
     for b, (report, variation) in enumerate(zip(reports, variations)):  # first the bones: not a motion flaw
-        if variation > refiner.rigid_tolerance:
+        if variation > refiner.rigid_tolerance and (moved := np.flatnonzero((rigid[b] != clips[b]).any((1, 2)))).size:
+            kept = clips.shape[1] - moved.size
+            where = f"its rigid core's bone lengths ({kept} frames of the core or with bones that only shorten kept)"
             clips[b] = rigid[b]
-            report.changes.append({"start": 0, "stop": clips.shape[1], "step": "skeleton", "reason":
+            report.changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
                                    f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
-                                   f"0 %); every frame put back on {lengths}"})
+                                   f"0 %); {moved.size} frames put back on {where if kept else lengths}"})
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it
     clips = estimated_retiming(refiner, clips, reports, mode)  # timing first
     use_rec, use_cor, use_clf, use_den = (n in refiner.detect.split("+") for n in ("recognizer", "correction", "classifier", "denoiser"))
@@ -386,7 +367,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                 changed[lo:hi] = True
                 moved = 100 * float(np.linalg.norm(y[lo:hi] - clips[b][lo:hi], axis=-1).mean())
                 report.changes.append({"start": lo, "stop": hi, "step": kind, "repair": name, "reason":
-                                       f"flagged: {', '.join(evidence)}; {_how(name)} "
+                                       f"flagged: {', '.join(evidence)}; {repair_words(name)} "
                                        f"(moved {moved:.1f} cm on average){note}"})
                 if kind == "anchor":
                     inside = [a for a in report.anchors if lo <= a < hi]

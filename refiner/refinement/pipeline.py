@@ -35,7 +35,7 @@ from refiner.refinement.flaw_classifier import FlawClassifier
 from refiner.refinement.flaw_denoiser import FlawDenoiser
 from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.inputs import (AMPLITUDE, DENOISING, METHODS, MODES, POSING, RETIMING, RIGID_LENGTHS, TEXTURE,
-                                       auto_threads, check_choice, check_choices, check_metres, check_metres_each, check_threads, thread_limits)
+                                       auto_threads, check_choice, check_choices, check_flag, check_metres, check_metres_each, check_threads, thread_limits)
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pose_prior import PosePrior
@@ -116,6 +116,9 @@ class Refiner:
     rigid_lengths : {"proportions", "median"}, optional
         The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions the weights
         learned (``manifest["learned"]["bone_proportions"]``), or the medians alone (default: the former, if there).
+    rigid_core : bool, default=True
+        Keep a clip's rigid core and its frames whose bones only shorten (:func:`~refiner.core.rigid.rigid_skeleton`'s
+        ``keep_core``); False: every frame is projected (the previous release).
     quality, anchor_method, transition_method, anchor_noise
         Options of the concepts method, see :mod:`refiner.refinement.concepts_pipeline`: ``quality`` in
         {"pose", "encoder"}, ``anchor_method`` in {"posterior", "concept"}, ``transition_method`` in
@@ -144,7 +147,7 @@ class Refiner:
                  amplitude_restorer=None, pose_prior=None, texture_filter=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
-                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, retiming: str | None = None,
+                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True, retiming: str | None = None,
                  denoising: str | None = None, amplitude: str = "restore", posing: str = "prior", texture: str = "off",
                  concept_snap: float = 0.0,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
@@ -202,6 +205,7 @@ class Refiner:
         if self.bone_proportions is not None and self.bone_proportions.mean.shape != (n_bones,):
             raise ValueError(f"the manifest's bone proportions have {self.bone_proportions.mean.size} bones; "
                              f"skeleton {skeleton!r} has {n_bones}.")
+        self.rigid_core = check_flag("rigid_core", rigid_core)
         self.rigid_lengths = check_choice("rigid_lengths", rigid_lengths or (
             "median" if self.bone_proportions is None else "proportions"), RIGID_LENGTHS)
         self.retiming = check_choice("retiming", retiming or ("flagged" if timing_estimator is None else "estimated"),

@@ -8,7 +8,7 @@ import numpy as np
 from refiner.core.validation import check_action
 from refiner.refinement.inputs import MIN_FRAMES
 
-__all__ = ["RefinementReport", "start_reports"]
+__all__ = ["RefinementReport", "start_reports", "REPAIR_WORDS", "repair_words"]
 
 
 @dataclass
@@ -81,3 +81,26 @@ def start_reports(n_frames: int, actions, mode: str, action_names, *, batched: b
             report.note = f"clip has {n_frames} frames; at least {MIN_FRAMES} are needed to refine, returned unchanged"
         reports.append(report)
     return reports
+
+
+#: What each repair of the learned method does, in the words of a report's ``reason``.
+REPAIR_WORDS = {
+    "network": "corrected from the given frames and context by the repair network",
+    "network_infill": "in-filled from the context by the repair network",
+    "denoise": "corrected from the given frames by the denoising network",
+    "motion_infill": "in-filled from the context by the motion in-filler",
+    "retime": "re-timed along its own path with a smooth speed",
+    "stall_retime": "re-timed along its own path with a smooth speed where it stalls",
+    "forward_retime": "replayed forward only along its progress to the next kept pose",
+    "smooth": "smoothed in time",
+    "noise_filter": "denoised by the learned noise filter at its estimated noise level",
+    "root_infill": "root path in-filled, poses kept",
+    "spline": "smoothed in time by a smoothing spline fitted to it (smoothness by cross-validation)",
+    "planted_feet": "whole body moved back by the slip of the feet planted on the ground",
+}
+
+
+def repair_words(name: str) -> str:
+    """What a repair named like ``"network+planted_feet (widened by 4)"`` did, in words."""
+    base = name.split(" (")[0]
+    return ", then ".join(REPAIR_WORDS[part] for part in base.split("+")) + name[len(base):]
