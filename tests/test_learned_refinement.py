@@ -186,8 +186,8 @@ def test_rigid_skeleton_restores_stretched_bones(humanact12, rng):
 
 @pytest.mark.real_data
 def test_rigid_skeleton_keeps_a_clips_rigid_core(humanact12, rng):
-    """A mocap clip edited in places keeps its exact frames and its blended (shortened) ones; a stretched bone
-    is put back on the core's lengths, and a clip whose bones stretch everywhere has no core."""
+    """A mocap clip edited in places keeps its exact frames (and, asked, its blended ones, whose bones shorten); a
+    stretched bone goes back on the core's lengths; a clip whose bones stretch everywhere has no core."""
     from refiner.core.rigid import rigid_core
 
     clip = humanact12[20].joints[:60].astype(np.float64)
@@ -199,18 +199,40 @@ def test_rigid_skeleton_keeps_a_clips_rigid_core(humanact12, rng):
     edited = with_bone_lengths(edited, joint_bone_lengths(edited, "humanact12") * grow, "humanact12")
     core = rigid_core(bone_lengths(edited, "humanact12"))
     assert core is not None and core[:10].all() and core[36:].all() and not core[30:36].any()
-    kept, variation = rigid_skeleton(edited, "humanact12", 0.005, keep_core=True)
+    kept, variation = rigid_skeleton(edited, "humanact12", 0.005, keep_core=True, keep_shortened=True)
     assert variation > 0.005
     moved = (kept != edited).any((1, 2))
     assert not moved[:30].any() and moved[30:36].all() and not moved[36:].any()  # the core and the blend as given
     np.testing.assert_allclose(bone_lengths(kept[30:36], "humanact12"), bone_lengths(clip[30:36], "humanact12"), rtol=2e-3)
-    assert (rigid_skeleton(edited, "humanact12", 0.005)[0] != edited).any((1, 2)).sum() > 50  # the old step: nearly all
+    rigid = rigid_skeleton(kept, "humanact12", 0.005, keep_core=True)[0]  # the refiner's last step: the blend too
+    moved = (rigid != kept).any((1, 2))
+    assert moved[10:20].all() and not moved[:10].any() and not moved[20:].any()
+    np.testing.assert_allclose(bone_lengths(rigid, "humanact12"), bone_lengths(clip, "humanact12"), rtol=2e-3)
+    assert (rigid_skeleton(edited, "humanact12", 0.005)[0] != edited).any((1, 2)).sum() > 50  # without: nearly all
     stretched = with_bone_lengths(clip, lengths * rng.uniform(0.9, 1.1, size=lengths.shape), "humanact12")
     assert rigid_core(bone_lengths(stretched, "humanact12")) is None
-    np.testing.assert_array_equal(rigid_skeleton(stretched, "humanact12", 0.005, keep_core=True)[0],
+    np.testing.assert_array_equal(rigid_skeleton(stretched, "humanact12", 0.005, keep_core=True, keep_shortened=True)[0],
                                   rigid_skeleton(stretched, "humanact12", 0.005)[0])
     with pytest.raises(ValueError, match="T, n_bones"):
         rigid_core(bone_lengths(clip[None], "humanact12"))
+
+
+@pytest.mark.real_data
+def test_refine_puts_shortened_bones_back_at_last(humanact12):
+    """A mocap clip whose arm shrinks for a while comes back with rigid bones, its other frames exactly as given."""
+    clip = humanact12[20].joints[:60].astype(np.float32)
+    lengths = joint_bone_lengths(clip, "humanact12")
+    scale = np.ones_like(lengths)
+    scale[20:40, [17, 19, 21, 23]] = 1 - 0.1 * np.sin(np.linspace(0, np.pi, 20))[:, None] ** 2
+    shrunk = with_bone_lengths(clip, lengths * scale, "humanact12").astype(np.float32)
+    out, report = Refiner.pretrained("humanact12", split="train").refine(shrunk, action=humanact12[20].action,
+                                                                         return_report=True)
+    assert bone_length_variation(shrunk) > 0.005 and bone_length_variation(out) < 1e-4, bone_length_variation(out)
+    untouched = ~np.zeros(60, bool)
+    for change in report.changes:
+        untouched[change["start"] : change["stop"]] = False
+    assert untouched.sum() >= 30 and np.array_equal(out[untouched], shrunk[untouched])
+    assert any(c["step"] == "skeleton" and "rigid core" in c["reason"] for c in report.changes)
 
 
 def test_robust_bone_lengths_trust_noise_and_doubt_drift(rng):

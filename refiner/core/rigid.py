@@ -35,7 +35,7 @@ def rigid_core(lengths: np.ndarray, *, tolerance: float = CORE_TOLERANCE, share:
 
 def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, iterations: int = 60,
                    bones: np.ndarray | None = None, proportions: "BoneProportions | None" = None,
-                   keep_core: bool = False) -> tuple[np.ndarray, float | np.ndarray]:
+                   keep_core: bool = False, keep_shortened: bool = False) -> tuple[np.ndarray, float | np.ndarray]:
     """Joints ``(T, J, 3)`` put on robust bone lengths when any bone's length varies (std / mean)
     by more than ``tolerance``; returns ``(joints, worst variation)`` (joints unchanged below it).
     A batch ``(B, T, J, 3)`` is judged and projected clip by clip in one pass; its variation is ``(B,)``.
@@ -45,12 +45,11 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
     evidence is weak (:func:`robust_bone_lengths`).
 
     ``keep_core``: a clip with a :func:`rigid_core` is put on the core's median lengths instead, and
-    its core frames and the frames whose every bone is no longer than those (within the core's
-    tolerance) are kept as given. Bones that only shorten come from poses blended or interpolated
-    between frames (a re-timing, a pose moved toward another): stretching them along their own
-    directions moved them further from the true pose, and the flaw steps after this one repair them
-    (``bench flaws``, calibration subjects 9-10, severity 2: wrong_anchor -1.9 -> -1.6 %, frozen
-    58.5 -> 59.0 %, reversed 40.7 -> 42.2 % of the added MPJPE removed, jitter 28.4 % either way).
+    its core frames are kept as given; with ``keep_shortened`` also the frames whose every bone is no
+    longer than those (within the core's tolerance). Bones that only shorten come from poses blended or
+    interpolated between frames (a re-timing, a pose moved toward another): the refiner's flaw steps
+    see them as given (stretched along their own directions first, a re-timing's poses came out
+    further from the true ones), and its last step puts those no repair changed on the core's lengths.
 
     The lengths are enforced by moving both ends of every bone toward its length (Jacobi
     iterations of a constraint projection), which spreads each correction over the joints next to
@@ -78,7 +77,7 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
         for k, b in enumerate(np.flatnonzero(todo) if keep_core else ()):
             if (core := rigid_core(lengths[b])) is not None:
                 target[k] = np.median(lengths[b][core], axis=0)
-                keep[k] = core | (lengths[b] <= target[k] * (1 + CORE_TOLERANCE)).all(-1)
+                keep[k] = core | (keep_shortened & (lengths[b] <= target[k] * (1 + CORE_TOLERANCE)).all(-1))
         projected = _project_lengths(xb[todo], pairs, target, iterations).astype(x.dtype)
         out[todo] = np.where(keep[..., None, None], xb[todo], projected)
     if single:

@@ -3,7 +3,7 @@
 0. **Rigid skeleton**, first: where a clip's bones vary in length more than mocap's
    (``rigid_tolerance``, coefficient of variation; real HumanAct12 clips: under 0.001 %), its frames are put
    back on the clip's median bone lengths (with ``rigid_core``, a mocap clip edited in places keeps its exact
-   frames and those whose bones only shorten), so the detectors judge the motion, not the bones.
+   frames and those whose bones only shorten, until the last step), so the detectors judge the motion, not the bones.
 1. **Recognition**: per-frame flaw probability from the kinematic flaw classifier
    (:class:`~refiner.refinement.flaw_classifier.FlawClassifier`, the default detector), anchor probability and
    the action from the recognition network (:class:`~refiner.refinement.learned_refinement.FlawRecognizer`,
@@ -20,8 +20,8 @@
    finds the result more real (:data:`VERIFY_TYPED`). Only the flagged runs are spliced in (displacement zero at the
    kept frames, smoothstep taper), and changed frames go back on the input's bone lengths. A run that contains a
    recognised anchor is reported as an anchor refinement, the others as transition refinements. Last, the noise steps
-   (:func:`filtered_noise`), the pose prior (:func:`prior_posed`) and the texture filter
-   (:func:`~refiner.refinement.texture_filter.filtered_texture`).
+   (:func:`filtered_noise`), the pose prior (:func:`prior_posed`), the texture filter
+   (:func:`~refiner.refinement.texture_filter.filtered_texture`) and the kept frames of a rigid core's clip put on its lengths.
 """
 from __future__ import annotations
 
@@ -259,13 +259,13 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     clips = clips.copy()
     prior = refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None
     rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior,
-                                       keep_core=refiner.rigid_core)
+                                       keep_core=refiner.rigid_core, keep_shortened=refiner.rigid_core)
     drifting = drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, variation=variations)  # the input's bones
     lengths = "the clip's median bone lengths" + ("" if prior is None else ", drawn toward human proportions where they drift")
     for b, (report, variation) in enumerate(zip(reports, variations)):  # first the bones: not a motion flaw
         if variation > refiner.rigid_tolerance and (moved := np.flatnonzero((rigid[b] != clips[b]).any((1, 2)))).size:
             kept = clips.shape[1] - moved.size
-            where = f"its rigid core's bone lengths ({kept} frames of the core or with bones that only shorten kept)"
+            where = f"its rigid core's bone lengths ({kept} frames of the core or with bones that only shorten kept for now)"
             clips[b] = rigid[b]
             report.changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
                                    f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
@@ -378,4 +378,18 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
     noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
-    return filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)
+    out = filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)
+    return _rigid_at_last(refiner, out, reports, prior) if refiner.rigid_core else out
+
+
+def _rigid_at_last(refiner, clips: np.ndarray, reports: list, prior) -> np.ndarray:
+    """``clips (B, T, J, 3)`` with the frames the first step kept off a rigid core (bones that only shorten) and no
+    repair changed put on the core's bone lengths, each clip's change reported: the output's bones are rigid."""
+    out = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior, keep_core=True)[0]
+    for b in np.flatnonzero((out != clips).any((1, 2, 3))):
+        moved = np.flatnonzero((out[b] != clips[b]).any((1, 2)))
+        cm = 100 * float(np.linalg.norm(out[b][moved] - clips[b][moved], axis=-1).mean())
+        reports[b].changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
+                                   f"{moved.size} frames off the clip's rigid core whose bones shortened, which no repair "
+                                   f"changed, put back on the core's bone lengths (moved {cm:.2f} cm on average)"})
+    return out

@@ -117,8 +117,8 @@ class Refiner:
         The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions the weights
         learned (``manifest["learned"]["bone_proportions"]``), or the medians alone (default: the former, if there).
     rigid_core : bool, default=True
-        Keep a clip's rigid core and its frames whose bones only shorten (:func:`~refiner.core.rigid.rigid_skeleton`'s
-        ``keep_core``); False: every frame is projected (the previous release).
+        The flaw steps see a clip's rigid core and its frames whose bones only shorten as given; the last step puts the
+        latter on the core's lengths (:func:`~refiner.core.rigid.rigid_skeleton`); False: all projected first (the previous release).
     quality, anchor_method, transition_method, anchor_noise
         Options of the concepts method, see :mod:`refiner.refinement.concepts_pipeline`: ``quality`` in
         {"pose", "encoder"}, ``anchor_method`` in {"posterior", "concept"}, ``transition_method`` in
