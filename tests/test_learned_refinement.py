@@ -204,6 +204,7 @@ def test_rigid_skeleton_keeps_a_clips_rigid_core(humanact12, rng):
     moved = (kept != edited).any((1, 2))
     assert not moved[:30].any() and moved[30:36].all() and not moved[36:].any()  # the core and the blend as given
     np.testing.assert_allclose(bone_lengths(kept[30:36], "humanact12"), bone_lengths(clip[30:36], "humanact12"), rtol=2e-3)
+    np.testing.assert_allclose(kept[30:36, :18], edited[30:36, :18], atol=1e-3)  # rebuilt outward: the parents stay
     rigid = rigid_skeleton(kept, "humanact12", 0.005, keep_core=True)[0]  # the refiner's last step: the blend too
     moved = (rigid != kept).any((1, 2))
     assert moved[10:20].all() and not moved[:10].any() and not moved[20:].any()
@@ -232,6 +233,7 @@ def test_refine_puts_shortened_bones_back_at_last(humanact12):
     for change in report.changes:
         untouched[change["start"] : change["stop"]] = False
     assert untouched.sum() >= 30 and np.array_equal(out[untouched], shrunk[untouched])
+    assert np.abs(out - clip).max() < 1e-3  # one limb's bones off: rebuilt outward, the true pose comes back
     assert any(c["step"] == "skeleton" and "rigid core" in c["reason"] for c in report.changes)
 
 
