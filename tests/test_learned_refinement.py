@@ -216,6 +216,10 @@ def test_rigid_skeleton_keeps_a_clips_rigid_core(humanact12, rng):
                                   rigid_skeleton(stretched, "humanact12", 0.005)[0])
     with pytest.raises(ValueError, match="T, n_bones"):
         rigid_core(bone_lengths(clip[None], "humanact12"))
+    long = rng.uniform(0.9, 1.1, (3000, 23))
+    long[1000:1800] = 0.3  # a long clip: its core is found among evenly spaced candidates
+    assert np.array_equal(np.flatnonzero(rigid_core(long)), np.arange(1000, 1800))
+    assert rigid_core(long[:1000]) is None
 
 
 @pytest.mark.real_data
