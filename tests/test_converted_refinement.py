@@ -143,21 +143,39 @@ def test_own_labels_refine_action_agnostic_short_clips_stay_and_errors_name_the_
 
 
 @pytest.mark.real_data
+def test_converted_layouts_rebuild_a_stretched_limb(held_out):
+    """A uestc clip whose right arm stretches 10 % for 20 frames gets the arm's own lengths back, parents in place."""
+    x = convert(held_out[0].joints, "humanact12", "uestc").astype(np.float64)
+    skel = get_skeleton("uestc")
+    arm = [skel.joint_names.index(n) for n in ("right_elbow", "right_wrist")]
+    bump = np.zeros(len(x))
+    bump[5:25] = np.sin(np.linspace(0, np.pi, 20)) ** 2
+    scale = np.ones((len(x), len(skel.joint_names)))
+    scale[:, arm] = 1 + 0.1 * bump[:, None]
+    stretched = with_bone_lengths(x, joint_bone_lengths(x, "uestc") * scale, "uestc").astype(np.float32)
+    err = lambda m: np.linalg.norm(Refiner.pretrained("uestc", split="train", **m).refine(stretched) - x, axis=-1).mean()  # noqa: E731
+    flawed = np.linalg.norm(stretched - x, axis=-1).mean()
+    assert err({}) < 0.1 * flawed < 0.1 * err({"rigid_core": False}), (err({}), flawed)
+
+
+@pytest.mark.real_data
 def test_converted_layouts_draw_drifting_bones_toward_their_own_proportions(held_out):
     """The HumanAct12 weights carry proportions of the layouts they serve; a drifting uestc bone is drawn back."""
     from refiner.core.skeletons import BoneProportions
 
-    model = Refiner.pretrained("uestc", split="train")
+    core = Refiner.pretrained("uestc", split="train")
+    model = Refiner.pretrained("uestc", split="train", rigid_core=False)  # a clip with no rigid core
     assert model.proportions.mean.shape == (17,) and model.base.rigid_lengths == "proportions"
     assert Refiner.pretrained("humanml3d", split="train").proportions.mean.shape == (21,)
-    median = Refiner.pretrained("uestc", split="train", rigid_lengths="median")
+    median = Refiner.pretrained("uestc", split="train", rigid_lengths="median", rigid_core=False)
     assert median.proportions is None and median.base.rigid_lengths == "median"
     x = convert(held_out[0].joints, "humanact12", "uestc").astype(np.float64)
     wrist = get_skeleton("uestc").joint_names.index("right_wrist")
     drift = x.copy()
     drift[:, wrist] += np.linspace(0, 1, len(x))[:, None] * np.array([0.0, 0.06, 0.0])  # the forearm stretches by up to 6 cm
     err = {name: np.linalg.norm(m.refine(drift.astype(np.float32)) - x, axis=-1).mean() for name, m in
-           (("proportions", model), ("median", median))}
+           (("proportions", model), ("median", median), ("core", core))}
     assert err["proportions"] < err["median"], err
+    assert err["core"] < err["proportions"], err  # the drift starts late enough: its first frames hold the true lengths
     with pytest.raises(ValueError, match="one share per uestc bone"):
         ConvertedRefiner(model.base, "uestc", proportions=BoneProportions(np.ones(5) / 5, np.zeros(5)))

@@ -124,8 +124,9 @@ class ConvertedRefiner:
             raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
         known = [a if isinstance(a, str) and a in self.action_names else None for a in actions]
         long_enough = clips.shape[1] >= MIN_FRAMES  # shorter clips come back exactly as given
+        core = bool(getattr(self.base, "rigid_core", False))  # mocap edited in places: on its exact frames' lengths
         rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones,
-                                proportions=self.proportions) if long_enough else (c, 0.0) for c in clips]
+                                proportions=self.proportions, keep_core=core) if long_enough else (c, 0.0) for c in clips]
         given = np.stack([r[0] for r in rigid]).astype(np.float32)
         # the joints the conversion estimates do not keep their lengths, and the flaw classifier reads
         # bone-length changes as flaws (it flagged every frame of converted clean clips): make them rigid
@@ -158,7 +159,8 @@ class ConvertedRefiner:
             if variation > self.rigid_tolerance:
                 report.changes.insert(0, {"start": 0, "stop": x.shape[-3], "step": "skeleton", "reason":
                                           f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
-                                          f"0 %); every frame put back on the clip's median {self.skeleton} bone lengths"
+                                          f"0 %); every frame off its rigid core (if it has one) put back on the clip's "
+                                          f"median {self.skeleton} bone lengths (the core's, if it has one)"
                                           + (", drawn toward human proportions where they drift" if self.proportions
                                              is not None else "") + " (bones that span a bending chain left free)"})
         out = out if batched else out[0]
