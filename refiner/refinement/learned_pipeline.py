@@ -262,9 +262,14 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                                        keep_core=refiner.rigid_core, keep_shortened=refiner.rigid_core)
     drifting = drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, variation=variations)  # the input's bones
     lengths = "the clip's median bone lengths" + ("" if prior is None else ", drawn toward human proportions where they drift")
+    cored = np.zeros(len(clips), bool)  # clips with a rigid core: their kept frames go on its lengths at last
     for b, (report, variation) in enumerate(zip(reports, variations)):  # first the bones: not a motion flaw
-        if variation > refiner.rigid_tolerance and (moved := np.flatnonzero((rigid[b] != clips[b]).any((1, 2)))).size:
-            kept = clips.shape[1] - moved.size
+        if variation <= refiner.rigid_tolerance:
+            continue
+        moved = np.flatnonzero((rigid[b] != clips[b]).any((1, 2)))
+        kept = clips.shape[1] - moved.size
+        cored[b] = kept > 0  # only a rigid core's clip keeps frames here
+        if moved.size:
             where = f"its rigid core's bone lengths ({kept} frames of the core or with bones that only shorten kept for now)"
             clips[b] = rigid[b]
             report.changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
@@ -379,13 +384,15 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
     out = filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)
-    return _rigid_at_last(refiner, out, reports, prior) if refiner.rigid_core else out
+    return _rigid_at_last(refiner, out, reports, prior, cored) if cored.any() else out
 
 
-def _rigid_at_last(refiner, clips: np.ndarray, reports: list, prior) -> np.ndarray:
+def _rigid_at_last(refiner, clips: np.ndarray, reports: list, prior, cored: np.ndarray) -> np.ndarray:
     """``clips (B, T, J, 3)`` with the frames the first step kept off a rigid core (bones that only shorten) and no
-    repair changed put on the core's bone lengths, each clip's change reported: the output's bones are rigid."""
-    out = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior, keep_core=True)[0]
+    repair changed put on the core's bone lengths in the ``cored (B,)`` clips, each change reported: the output's bones
+    are rigid."""
+    out = clips.copy()
+    out[cored] = rigid_skeleton(clips[cored], refiner.skeleton, refiner.rigid_tolerance, proportions=prior, keep_core=True)[0]
     for b in np.flatnonzero((out != clips).any((1, 2, 3))):
         moved = np.flatnonzero((out[b] != clips[b]).any((1, 2)))
         cm = 100 * float(np.linalg.norm(out[b][moved] - clips[b][moved], axis=-1).mean())
