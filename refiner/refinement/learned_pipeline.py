@@ -267,8 +267,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
         if variation <= refiner.rigid_tolerance:
             continue
         moved = np.flatnonzero((rigid[b] != clips[b]).any((1, 2)))
-        kept = clips.shape[1] - moved.size
-        cored[b] = kept > 0  # only a rigid core's clip keeps frames here
+        cored[b] = (kept := clips.shape[1] - moved.size) > 0  # only a rigid core's clip keeps frames here
         if moved.size:
             where = f"its rigid core's bone lengths ({kept} frames of the core or with bones that only shorten kept for now)"
             clips[b] = rigid[b]
@@ -388,15 +387,14 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
 
 
 def _rigid_at_last(refiner, clips: np.ndarray, reports: list, prior, cored: np.ndarray) -> np.ndarray:
-    """``clips (B, T, J, 3)`` with the frames the first step kept off a rigid core (bones that only shorten) and no
-    repair changed put on the core's bone lengths in the ``cored (B,)`` clips, each change reported: the output's bones
-    are rigid."""
+    """``clips (B, T, J, 3)`` with the frames the first step kept off the rigid core of the ``cored (B,)`` clips (bones that
+    only shorten) and no repair changed put on the core's bone lengths, each change reported: the output's bones are rigid."""
     out = clips.copy()
     out[cored] = rigid_skeleton(clips[cored], refiner.skeleton, refiner.rigid_tolerance, proportions=prior, keep_core=True)[0]
     for b in np.flatnonzero((out != clips).any((1, 2, 3))):
         moved = np.flatnonzero((out[b] != clips[b]).any((1, 2)))
-        cm = 100 * float(np.linalg.norm(out[b][moved] - clips[b][moved], axis=-1).mean())
         reports[b].changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
                                    f"{moved.size} frames off the clip's rigid core whose bones shortened, which no repair "
-                                   f"changed, put back on the core's bone lengths (moved {cm:.2f} cm on average)"})
+                                   f"changed, put back on the core's bone lengths (moved "
+                                   f"{100 * float(np.linalg.norm(out[b][moved] - clips[b][moved], axis=-1).mean()):.2f} cm on average)"})
     return out
