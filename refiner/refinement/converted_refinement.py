@@ -152,17 +152,19 @@ class ConvertedRefiner:
         out[changed] = (given[changed] + delta[changed]).astype(np.float32)
         note = (f"refined as {self.base.skeleton!r} through refiner.core.skeletons.convert; only the change came back"
                 + (f" (estimated on the way back: {', '.join(self.estimated)})" if self.estimated else ""))
-        for report, (_, variation), asked, used in zip(reports, rigid, actions, known):
+        for report, (joints, variation), clip, asked, used in zip(reports, rigid, clips, actions, known):
             report.notes.append(note)
             if asked is not None and used is None:
                 report.notes.append(f"action {asked!r} is not one of the refiner's actions; refined action-agnostic")
             if variation > self.rigid_tolerance:
+                moved = int((joints != clip).reshape(len(clip), -1).any(-1).sum())
+                lengths = (f"its rigid core's {self.skeleton} bone lengths ({len(clip) - moved} exact frames kept)"
+                           if moved < len(clip) else f"the clip's median {self.skeleton} bone lengths"
+                           + (", drawn toward human proportions where they drift" if self.proportions is not None else ""))
                 report.changes.insert(0, {"start": 0, "stop": x.shape[-3], "step": "skeleton", "reason":
                                           f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
-                                          f"0 %); every frame off its rigid core (if it has one) put back on the clip's "
-                                          f"median {self.skeleton} bone lengths (the core's, if it has one)"
-                                          + (", drawn toward human proportions where they drift" if self.proportions
-                                             is not None else "") + " (bones that span a bending chain left free)"})
+                                          f"0 %); {moved} frames put back on {lengths} (bones that span a bending "
+                                          "chain left free)"})
         out = out if batched else out[0]
         result = like_input(out, seq, x)
         if return_report:
