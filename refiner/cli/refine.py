@@ -45,6 +45,9 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--concept-snap", type=float, default=0.0, metavar="W",
                    help="move every anchor W of the way (0-1) onto its action's nearest anchor concept; needs "
                         "--action; realism over fidelity (default 0: off)")
+    p.add_argument("--misread-snap", type=float, default=None, metavar="W",
+                   help="snap W (0-1) of the way onto its action's anchor concepts each clip of a given --action that "
+                        "reads as another action; default: 1 with --adapter (raw generator output), else 0")
     p.add_argument("--texture", default=None, choices=["auto", "all", "off"],
                    help="clips through the texture filter: those noisy throughout (auto), every clip (all: generator "
                         "output), none (off); default: all with --adapter (raw generator output), else off")
@@ -57,7 +60,8 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def refine_run(args: argparse.Namespace) -> int:
-    from refiner.refinement.pipeline import Refiner  # imports torch: here, so that --help stays cheap
+    from refiner.refinement.inputs import GENERATOR_OPTIONS  # these import torch: here, so that --help stays cheap
+    from refiner.refinement.pipeline import Refiner
 
     set_threads(args.threads)
     skeleton = get_skeleton(args.skeleton).name
@@ -86,7 +90,9 @@ def refine_run(args: argparse.Namespace) -> int:
     if args.concept_snap and args.action is None:  # an inferred action is never snapped to: it would do nothing
         raise ValueError("`--concept-snap` needs `--action`: the anchors are snapped onto that action's concepts.")
     snap = {"concept_snap": args.concept_snap} if args.concept_snap else {}
-    snap["texture"] = args.texture or ("all" if args.adapter is not None else "off")  # an adapter's input is generated
+    generated = GENERATOR_OPTIONS if args.adapter is not None else {"texture": "off", "misread_snap": 0.0}
+    snap["texture"] = args.texture or generated["texture"]  # an adapter's input is generated
+    snap["misread_snap"] = generated["misread_snap"] if args.misread_snap is None else args.misread_snap
     refiner = Refiner.load(args.refiner, **snap) if args.refiner is not None else Refiner.pretrained(skeleton, **snap)
     pm = get_plugin_manager() if args.adapter is not None else None
     if pm is not None:

@@ -14,7 +14,7 @@ import numpy as np
 from refiner.core.skeletons import bone_lengths, get_skeleton, joint_bone_lengths, with_bone_lengths
 
 __all__ = ["rigid_skeleton", "rigid_core", "BoneProportions", "robust_bone_lengths", "CORE_TOLERANCE", "CORE_SHARE",
-           "REBUILD_BONES"]
+           "REBUILD_BONES", "BLEND_AUTOCORRELATION", "EXACT_TOLERANCE", "EXACT_FRAMES"]
 
 #: Frames whose bones all lie within this share of one another's lengths form a rigid core (mocap bones
 #: are exact to 1e-5; a frame blended 10 % toward another pose shortens its forearm by about 1 %).
@@ -22,6 +22,12 @@ CORE_TOLERANCE = 0.002
 #: A rigid core must hold at least this share of the clip's frames; a generator's clip, whose bones
 #: stretch in every frame, has none and is projected whole.
 CORE_SHARE = 0.25
+#: ... or at least :data:`EXACT_FRAMES` frames whose bones agree to this share, which only mocap's exact bones do
+#: (float32 mocap: 1e-5; no sample of the actor, mdm or actor-large reference generators or of the real
+#: Action2Motion xyz samples has two frames within 1e-3 of each other): a short clip blended toward another pose
+#: over all but its first and last frames keeps those two exact, and their lengths are the true ones.
+EXACT_TOLERANCE = 1e-4
+EXACT_FRAMES = 2
 #: A frame off a rigid core with at most this many bones off the core's lengths (a limb's chain: SMPL's arm from
 #: the collar to the hand is 5) is rebuilt from the root outwards, each such bone keeping its direction, so its
 #: children move and its parent stays: a limb stretched or shrunk 10 % over 20 frames (every 2nd clip of subjects
@@ -30,23 +36,36 @@ CORE_SHARE = 0.25
 #: benchmark's families and jitter, whose frames have most bones off, are projected as before. Bones left free
 #: (``bones``) keep each frame's own length; a uestc clip's stretched arm: -2.5 -> 99.1 %, humanml3d's -5.2 -> 100 %.
 REBUILD_BONES = 6
+#: ... and so is every frame off a rigid core whose bones deviate smoothly from frame to frame (lag-1
+#: autocorrelation of the off-core frames' relative deviations at least this): a pose blended toward another's,
+#: whose directions are the evidence, not noise. Subjects 11-12, severity 2 (every 3rd clip): the benchmark's
+#: wrong anchors 0.60-1.00 (5 % quantile 0.86), its jitter -0.12-0.24, its re-timings 0-0.68. Rebuilding every
+#: off-core frame took wrong_anchor -0.7 -> +2.2 % but jitter 32.3 -> -1.4 % (noise carried down each limb),
+#: hence the gate.
+BLEND_AUTOCORRELATION = 0.8
 
 
 def rigid_core(lengths: np.ndarray, *, tolerance: float = CORE_TOLERANCE, share: float = CORE_SHARE,
-               candidates: int = 64) -> np.ndarray | None:
+               exact: float | None = EXACT_TOLERANCE, candidates: int = 64) -> np.ndarray | None:
     """``(T,)`` bool: the largest set of frames whose bone lengths ``(T, n_bones)`` all lie within
-    ``tolerance`` (relative) of one frame's, if it holds at least ``share`` of the frames; else None. The
-    frame is one of ``candidates`` evenly spaced ones (every frame of a clip that short): a core of a
-    quarter of the frames holds some of them, and a long clip costs ``candidates`` passes, not ``T``."""
+    ``tolerance`` (relative) of one frame's, if it holds at least ``share`` of the frames, or else the largest
+    such set around a frame that :data:`EXACT_FRAMES` frames match within ``exact`` (None: the share alone);
+    else None. The frame is one of ``candidates`` evenly spaced ones (every frame of a clip that short): a
+    core of a quarter of the frames holds some of them, and a long clip costs ``candidates`` passes, not ``T``."""
     x = np.asarray(lengths, np.float64)
     if x.ndim != 2:
         raise ValueError(f"`lengths` must be (T, n_bones); got shape {x.shape}.")
-    best = np.zeros(len(x), bool)
+    best, best_exact = np.zeros(len(x), bool), np.zeros(len(x), bool)
     for t in np.unique(np.linspace(0, len(x) - 1, min(len(x), candidates)).round().astype(int)):
-        close = (np.abs(x - x[t]) <= tolerance * np.maximum(x, 1e-9)).all(-1)
+        gap = np.abs(x - x[t]) / np.maximum(x, 1e-9)
+        close = (gap <= tolerance).all(-1)
         if close.sum() > best.sum():
             best = close
-    return best if best.sum() >= share * len(x) else None
+        if exact is not None and close.sum() > best_exact.sum() and (gap <= exact).all(-1).sum() >= EXACT_FRAMES:
+            best_exact = close
+    if best.sum() >= share * len(x):
+        return best
+    return best_exact if best_exact.any() else None
 
 
 def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, iterations: int = 60,
@@ -61,7 +80,8 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
     evidence is weak (:func:`robust_bone_lengths`).
 
     ``keep_core``: a clip with a :func:`rigid_core` is put on the core's median lengths instead (a frame
-    with few bones off them rebuilt outward, :data:`REBUILD_BONES`), and its core frames are kept as
+    with few bones off them rebuilt outward, :data:`REBUILD_BONES`, as is every off-core frame of a clip whose
+    bones deviate smoothly, :data:`BLEND_AUTOCORRELATION`), and its core frames are kept as
     given; with ``keep_shortened`` also the frames whose every bone is no longer than those (within the
     core's tolerance). Bones that only shorten come from poses blended or
     interpolated between frames (a re-timing, a pose moved toward another): the refiner's flaw steps
@@ -72,7 +92,7 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
     iterations of a constraint projection), which spreads each correction over the joints next to
     the bone; rebuilding the skeleton outward from the root instead carries every correction on to
     all descendants (it raised the error of drifting joints from 3.8 to 5.3 cm), which is right only
-    where one chain's bones are off (above).
+    where one chain's bones are off or a pose was blended toward another (above).
     """
     x = np.asarray(joints)
     single = x.ndim == 3
@@ -97,8 +117,10 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
             if (core := rigid_core(lengths[b])) is not None:
                 target[k] = np.median(lengths[b][core], axis=0)
                 keep[k] = core | (keep_shortened & (lengths[b] <= target[k] * (1 + CORE_TOLERANCE)).all(-1))
-                off = np.abs(lengths[b] / target[k] - 1) > CORE_TOLERANCE
-                rebuild[k] = ~keep[k] & (off.sum(-1) <= REBUILD_BONES)
+                dev = np.where(core[:, None], 0.0, lengths[b] / target[k] - 1)
+                blended = (dev[1:] * dev[:-1]).sum() >= BLEND_AUTOCORRELATION * max((dev * dev).sum(), 1e-18)
+                off = np.abs(dev) > CORE_TOLERANCE
+                rebuild[k] = ~keep[k] & ((off.sum(-1) <= REBUILD_BONES) | blended)
         projected = _project_lengths(xb[todo], pairs, target, iterations).astype(x.dtype)
         for k, b in enumerate(np.flatnonzero(todo)):
             if rebuild[k].any():

@@ -51,13 +51,14 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
     # these import torch: here, so that importing the suites (``motion-refiner --help``) stays cheap
     from refiner.reference import GENERATOR_KINDS, load_reference_generator
     from refiner.refinement.pipeline import Refiner
+    from refiner.refinement.inputs import GENERATOR_OPTIONS
 
     progress = progress or ignore_progress
     dataset, recognizer = load_humanact12_and_recognizer(data, hidden="random")
     real = dataset.split("test")
     # as RefinedGenerator refines a generator's clips: every one through the texture filter (texture="all")
-    refiners = {"refined": Refiner.pretrained("humanact12", split="train", texture="all"),
-                "snapped": Refiner.pretrained("humanact12", split="train", texture="all", concept_snap=1.0)}
+    refiners = {"refined": Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS),
+                "snapped": Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS, concept_snap=1.0)}
     # the paper's Table 1 protocol: 3,000 samples (250 per action), 20 replications
     per_action, n_rep = (3, 2) if quick else (250, 20)
     n_actions = len(dataset.action_names)

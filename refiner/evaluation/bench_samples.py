@@ -68,6 +68,7 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool, *, progress:
     ``progress`` is accepted like every suite's and not called.
     """
     from refiner.refinement.pipeline import Refiner  # imports torch: here, so that importing the suites stays cheap
+    from refiner.refinement.inputs import GENERATOR_OPTIONS
 
     _, recognizer = load_humanact12_and_recognizer(data, hidden="random")
     folder = (default_data_dir() if data is None else Path(data)).parent / "samples" / "action2motion"
@@ -79,9 +80,9 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool, *, progress:
     if quick:
         before, labels = before[:5], labels[:5]
     # generator output, refined as RefinedGenerator refines it: every clip through the texture filter
-    refiner = Refiner.pretrained("humanact12", split="train", texture="all")
+    refiner = Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS)
     rec = sample_records(before, labels, recognizer, refiner, n_hidden=5 if quick else 20)
-    snapper = Refiner.pretrained("humanact12", split="train", texture="all", concept_snap=1.0)
+    snapper = Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS, concept_snap=1.0)
     snapped = sample_records(before, labels, recognizer, snapper, n_hidden=5 if quick else 20)
     rec["snapped"] = {**snapped["refined"], "frames_changed": snapped["frames_changed"]}
     ntu = _ntu13_records(data, folder, quick)
@@ -97,6 +98,7 @@ def _ntu13_records(data, folder: Path, quick: bool):
     # these import torch: here, so that importing the suites stays cheap
     from refiner.evaluation.evaluators import load_recognizer
     from refiner.refinement.pipeline import Refiner
+    from refiner.refinement.inputs import GENERATOR_OPTIONS
 
     path, labels_path = folder / "ntu13_xyz_vae_samples.npy", folder / "ntu13_xyz_vae_labels.npy"
     if not (path.is_file() and labels_path.is_file()):
@@ -110,7 +112,7 @@ def _ntu13_records(data, folder: Path, quick: bool):
     before = convert("action2motion", np.load(path), representation="xyz", recenter=True, skeleton="uestc")
     if quick:
         before, labels = before[:5], labels[:5]
-    rec = sample_records(before, labels, recognizer, Refiner.pretrained("uestc", split="train", texture="all"),
+    rec = sample_records(before, labels, recognizer, Refiner.pretrained("uestc", split="train", **GENERATOR_OPTIONS),
                          n_hidden=5 if quick else 20, actions=[None] * len(before))
     rec["clips"] = len(before)
     return rec

@@ -28,17 +28,28 @@ from refiner.core.rotations import rotvec_to_rotmat
 from refiner.core.skeletons import get_skeleton
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 
-__all__ = ["snap_to_concepts", "snapped_to_concepts", "check_strength", "facing", "turned"]
+__all__ = ["snap_to_concepts", "snapped_to_concepts", "check_strength", "check_snaps", "facing", "turned"]
 
 
-def check_strength(strength) -> float:
-    """``strength`` as a float in [0, 1]; ValueError otherwise (bools and strings too)."""
+def check_strength(strength, name: str = "concept_snap") -> float:
+    """``strength`` as a float in [0, 1]; ValueError naming the option ``name`` otherwise (bools and strings too)."""
     if isinstance(strength, (bool, np.bool_)) or not isinstance(strength, (int, float, np.integer, np.floating)):
-        raise ValueError(f"`concept_snap` must be a number in [0, 1]; got {strength!r}.")
+        raise ValueError(f"`{name}` must be a number in [0, 1]; got {strength!r}.")
     value = float(strength)
     if not 0.0 <= value <= 1.0:
-        raise ValueError(f"`concept_snap` must be in [0, 1] (the share of the way onto the concept); got {strength!r}.")
+        raise ValueError(f"`{name}` must be in [0, 1] (the share of the way onto the concept); got {strength!r}.")
     return value
+
+
+def check_snaps(method: str, anchor_concepts, **strengths) -> tuple[float, ...]:
+    """The snap options ``strengths`` (name -> strength) checked with :func:`check_strength`, in order; a
+    ValueError naming the option if one is on without the learned ``method`` or without ``anchor_concepts``."""
+    values = tuple(check_strength(value, name) for name, value in strengths.items())
+    for name, value in zip(strengths, values):
+        if value and (method != "learned" or anchor_concepts is None):
+            raise ValueError(f"{name} needs method='learned' and `anchor_concepts`; this refiner has method="
+                             f"{method!r}, anchor_concepts {'missing' if anchor_concepts is None else 'given'}.")
+    return values
 
 
 def facing(poses: np.ndarray, skeleton: str) -> np.ndarray:
@@ -118,22 +129,37 @@ def snap_to_concepts(joints: np.ndarray, action: int, concepts: AnchorConcepts, 
 
 def snapped_to_concepts(refiner, clips: np.ndarray, reports: list, mode: str = "full") -> np.ndarray:
     """The refiner's concept-snap step: ``clips (B, T, J, 3)`` whose action was *given* snapped with
-    ``refiner.concept_snap`` and put back on their (median) bone lengths, each change in its clip's report;
-    returned as given when the option is 0 or ``mode`` is "transition" (this is an anchor refinement). An
-    inferred action is not snapped to: it would pull the clip toward the refiner's own guess."""
-    strength = float(getattr(refiner, "concept_snap", 0.0))
-    if strength == 0.0 or mode == "transition":
+    ``refiner.concept_snap`` (every such clip) or ``refiner.misread_snap`` (those whose report's
+    ``recognized_action`` is another action, the stronger of the two where both apply) and put back on their
+    (median) bone lengths, each change in its clip's report; returned as given when both options are 0 or
+    ``mode`` is "transition" (this is an anchor refinement). An inferred action is not snapped to: it would
+    pull the clip toward the refiner's own guess."""
+    every_clip, misread = float(getattr(refiner, "concept_snap", 0.0)), float(getattr(refiner, "misread_snap", 0.0))
+    if (every_clip == 0.0 and misread == 0.0) or mode == "transition":
         return clips
     out, every = clips.copy(), np.ones(clips.shape[1], bool)
     for b, report in enumerate(reports):
         if report.action is None or report.action_inferred:
             continue
+        is_misread = report.recognized_action is not None and report.recognized_action != report.action
+        strength = max(every_clip, misread if is_misread else 0.0)
+        if strength == 0.0:
+            continue
         snapped, anchors, distance = snap_to_concepts(clips[b], report.action, refiner.anchor_concepts,
                                                       skeleton=refiner.skeleton, strength=strength)
         out[b] = project_bone_lengths(snapped, reference_lengths(clips[b], refiner.skeleton), every, refiner.skeleton)
         moved = 100 * float(np.linalg.norm(out[b] - clips[b], axis=-1).mean())
+        why = (f"misread snap {strength:g}: the clip reads as another action ({_action_words(refiner, report)}), so"
+               if strength > every_clip else f"concept snap {strength:g}:")
         report.changes.append({"start": 0, "stop": clips.shape[1], "step": "concept_snap", "repair": "concept_snap",
-                               "reason": f"concept snap {strength:g}: {len(anchors)} anchors moved onto the nearest "
+                               "reason": f"{why} {len(anchors)} anchors moved onto the nearest "
                                          f"anchor concepts of the action (they were {100 * distance.mean():.1f} cm "
                                          f"away on average; moved {moved:.1f} cm on average)"})
     return out
+
+
+def _action_words(refiner, report) -> str:
+    """'recognised as <name>, <given name> at <p>' for a report's misread clip."""
+    names = getattr(refiner, "action_names", ())
+    name = names[report.recognized_action] if report.recognized_action < len(names) else str(report.recognized_action)
+    return f"recognised as {name}; {report.action_name or report.action} at probability {report.action_probability:.2f}"

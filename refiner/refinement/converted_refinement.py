@@ -143,6 +143,8 @@ class ConvertedRefiner:
         # the pose prior's drift gate reads this clip's own bones (the base's rigid step is off: tolerance inf)
         drifting = (drifting_skeleton(clips, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
                     else np.zeros(len(clips), bool))
+        drifting &= ~np.array([v > self.rigid_tolerance and (j == c).all(axis=(1, 2)).any()  # a rigid core's exact frames:
+                               for (j, v), c in zip(rigid, clips)])  # edited in places, not drifting throughout
         if getattr(self.base, "method", "learned") == "learned":  # the concepts pipeline has no pose-prior step
             noisy = np.array([r.noisy_throughout for r in reports], bool)
             refined = filtered_texture(self.base, prior_posed(self.base, refined, reports, drifting, noisy), reports, noisy)

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["MODES", "METHODS", "RIGID_LENGTHS", "RETIMING", "DENOISING", "AMPLITUDE", "POSING", "TEXTURE", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_flag", "check_metres",
+__all__ = ["MODES", "METHODS", "RIGID_LENGTHS", "RETIMING", "DENOISING", "AMPLITUDE", "POSING", "TEXTURE", "GENERATOR_OPTIONS", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_flag", "check_metres",
            "check_metres_each", "check_threads", "thread_limits"]
 
 #: Which refinement steps run after recognition.
@@ -31,6 +31,11 @@ POSING = ("prior", "keep")
 #: Clips the texture filter runs on: those the noise step finds noisy throughout (``"auto"``), every clip
 #: (``"all"``: the clips are a generator's), none (``"off"``).
 TEXTURE = ("auto", "all", "off")
+#: Refiner options for a generator's clips, as :class:`~refiner.refinement.refined_generator.RefinedGenerator`,
+#: ``motion-refiner refine --adapter`` and the benchmarks of generator output refine them: every clip through the
+#: texture filter, and a clip that reads as another action than the one it was generated for snapped onto its
+#: action's anchor concepts (both off for ``refine()``, which may be given mocap).
+GENERATOR_OPTIONS = {"texture": "all", "misread_snap": 1.0}
 #: Shortest clip refined; shorter ones pass through unchanged (reported).
 MIN_FRAMES = 8
 #: ``threads="auto"`` uses more than one thread from this many clips in a batch on.

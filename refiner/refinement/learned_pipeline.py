@@ -28,15 +28,16 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from refiner.core.skeletons import get_skeleton, rigid_skeleton
+from refiner.core.skeletons import get_skeleton
 from refiner.refinement.amplitude import restored_amplitude
 from refiner.refinement.anchor_recognition import anchor_peaks
 from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
 from refiner.refinement.retrace import cut_retraces
+from refiner.refinement.rigid_step import rigid_at_last, rigid_first
 from refiner.refinement.noise_filter import filtered_noise
-from refiner.refinement.pose_prior import drifting_skeleton, prior_posed
+from refiner.refinement.pose_prior import prior_posed
 from refiner.refinement.timing_estimation import estimated_retiming
 from refiner.refinement.texture_filter import filtered_texture
 from refiner.refinement.report import RefinementReport, repair_words, start_reports
@@ -256,24 +257,7 @@ def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
 
 def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
-    clips = clips.copy()
-    prior = refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None
-    rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior,
-                                       keep_core=refiner.rigid_core, keep_shortened=refiner.rigid_core)
-    drifting = drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, variation=variations)  # the input's bones
-    lengths = "the clip's median bone lengths" + ("" if prior is None else ", drawn toward human proportions where they drift")
-    cored = np.zeros(len(clips), bool)  # clips with a rigid core: their kept frames go on its lengths at last
-    for b, (report, variation) in enumerate(zip(reports, variations)):  # first the bones: not a motion flaw
-        if variation <= refiner.rigid_tolerance:
-            continue
-        moved = np.flatnonzero((rigid[b] != clips[b]).any((1, 2)))
-        cored[b] = (kept := clips.shape[1] - moved.size) > 0  # only a rigid core's clip keeps frames here
-        if moved.size:
-            where = f"its rigid core's bone lengths ({kept} frames of the core or with bones that only shorten kept for now)"
-            clips[b] = rigid[b]
-            report.changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
-                                   f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
-                                   f"0 %); {moved.size} frames put back on {where if kept else lengths}"})
+    clips, cored, drifting = rigid_first(refiner, clips, reports)
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it
     clips = estimated_retiming(refiner, clips, reports, mode)  # timing first
     use_rec, use_cor, use_clf, use_den = (n in refiner.detect.split("+") for n in ("recognizer", "correction", "classifier", "denoiser"))
@@ -282,7 +266,8 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     cut = cut_retraces(refiner, clips, reports, mode, None if clf_all is None else clf_all[..., 0])
     if clf_all is not None and (again := np.flatnonzero((cut != clips).any(axis=(1, 2, 3)))).size:
         clf_all[again] = refiner.flaw_classifier.predict_all(cut[again])  # a cut clip is judged anew
-    clips, rec, threshold = cut, refiner.flaw_recognizer.predict(cut, actions), float(refiner.flaw_recognizer.threshold_)
+    misread = getattr(refiner, "misread_snap", 0.0) > 0 and mode != "transition"  # the snap reads every clip's action
+    clips, rec, threshold = cut, refiner.flaw_recognizer.predict(cut, actions, estimate_action=misread), float(refiner.flaw_recognizer.threshold_)
     if use_clf:
         clf, clf_threshold = clf_all[..., 0], float(refiner.flaw_classifier.threshold_)
     if use_cor:
@@ -294,6 +279,8 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     for b, report in enumerate(reports):
         if report.action is None:
             report.action, report.action_inferred = int(np.argmax(rec["action"][b])), True
+        elif misread:
+            report.recognized_action, report.action_probability = int(np.argmax(rec["action"][b])), round(float(rec["action"][b][report.action]), 4)
         report.action_name = refiner.action_names[report.action] if refiner.action_names else None
         anchors = anchor_peaks(rec["anchor"][b], _ANCHOR_THRESHOLD)
         report.anchors, report.anchor_probability = anchors.tolist(), [round(float(p), 4) for p in rec["anchor"][b]]
@@ -383,18 +370,5 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
     out = filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)
-    return _rigid_at_last(refiner, out, reports, prior, cored) if cored.any() else out
+    return rigid_at_last(refiner, out, reports, cored)
 
-
-def _rigid_at_last(refiner, clips: np.ndarray, reports: list, prior, cored: np.ndarray) -> np.ndarray:
-    """``clips (B, T, J, 3)`` with the frames the first step kept off the rigid core of the ``cored (B,)`` clips (bones that
-    only shorten) and no repair changed put on the core's bone lengths, each change reported: the output's bones are rigid."""
-    out = clips.copy()
-    out[cored] = rigid_skeleton(clips[cored], refiner.skeleton, refiner.rigid_tolerance, proportions=prior, keep_core=True)[0]
-    for b in np.flatnonzero((out != clips).any((1, 2, 3))):
-        moved = np.flatnonzero((out[b] != clips[b]).any((1, 2)))
-        reports[b].changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
-                                   f"{moved.size} frames off the clip's rigid core whose bones shortened, which no repair "
-                                   f"changed, put back on the core's bone lengths (moved "
-                                   f"{100 * float(np.linalg.norm(out[b][moved] - clips[b][moved], axis=-1).mean()):.2f} cm on average)"})
-    return out

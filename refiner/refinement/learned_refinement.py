@@ -163,16 +163,17 @@ class FlawRecognizer(_LearnedStep):
             loss = loss + self.action_weight * ce
         return loss
 
-    def predict(self, joints: np.ndarray, actions=None) -> dict[str, np.ndarray]:
+    def predict(self, joints: np.ndarray, actions=None, *, estimate_action: bool = False) -> dict[str, np.ndarray]:
         """Probabilities for a batch ``(B, T, J, 3)`` metres (T >= 2).
 
         Returns ``flaw`` ``(B, T)``, ``anchor`` ``(B, T)`` and ``action`` ``(B, n_actions)``
-        (estimated with the action treated as unknown; meaningful for the clips whose action is unknown).
+        (estimated with the action treated as unknown; meaningful for the clips whose action is unknown,
+        or for every clip with ``estimate_action``, which costs a second pass where actions are given).
         """
         check_is_fitted(self, "network_", msg=NOT_FITTED)
         x = np.asarray(joints, np.float32)
         acts = self._actions(actions, len(x))
-        unknown = bool((acts == self.n_actions_).any())
+        unknown = bool(estimate_action) or bool((acts == self.n_actions_).any())
 
         def fn(xw, a):
             flaw, anchor, logits = self.network_(xw, a)

@@ -26,7 +26,7 @@ from refiner.core.validation import check_joints
 from refiner.nn.training import resolve_device
 from refiner.refinement import concepts_pipeline, learned_pipeline
 from refiner.refinement.amplitude import AmplitudeRestorer
-from refiner.refinement.concept_snap import check_strength
+from refiner.refinement.concept_snap import check_snaps, check_strength
 from refiner.refinement.anchor_quality import AnchorQuality
 from refiner.refinement.anchor_recognition import AnchorRecognizer
 from refiner.refinement.anchor_refinement import AnchorRefiner
@@ -113,6 +113,9 @@ class Refiner:
     concept_snap : float in [0, 1], default=0
         The concept-snap option (:mod:`refiner.refinement.concept_snap`): a clip of a given action has its anchors moved
         this share of the way onto the action's nearest anchor concepts; fidelity traded for realism (off).
+    misread_snap : float in [0, 1], default=0
+        The same snap for the clips of a given action that the recognition network reads as another: for a generator's
+        clips (``GENERATOR_OPTIONS``: 1); off, as real clips of unseen people are misread too (15 % of subjects 11-12).
     rigid_lengths : {"proportions", "median"}, optional
         The lengths of that rigid skeleton: the clip's medians drawn toward the human bone proportions the weights
         learned (``manifest["learned"]["bone_proportions"]``), or the medians alone (default: the former, if there).
@@ -149,7 +152,7 @@ class Refiner:
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True, retiming: str | None = None,
                  denoising: str | None = None, amplitude: str = "restore", posing: str = "prior", texture: str = "off",
-                 concept_snap: float = 0.0,
+                 concept_snap: float = 0.0, misread_snap: float = 0.0,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | str | None = "auto", manifest: dict | None = None):
@@ -162,10 +165,8 @@ class Refiner:
         self.amplitude, self.posing = check_choice("amplitude", amplitude, AMPLITUDE), check_choice("posing", posing, POSING)
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
-        self.concept_snap = check_strength(concept_snap)
-        if self.concept_snap and (self.method != "learned" or anchor_concepts is None):
-            raise ValueError(f"concept_snap needs method='learned' and `anchor_concepts`; this refiner has method="
-                             f"{self.method!r}, anchor_concepts {'missing' if anchor_concepts is None else 'given'}.")
+        self.concept_snap, self.misread_snap = check_snaps(self.method, anchor_concepts, concept_snap=concept_snap,
+                                                           misread_snap=misread_snap)
         if self.method == "learned" and not learned:
             raise ValueError("method='learned' needs a `flaw_recognizer` and a `flaw_repairer`.")
         paper = {"recognizer": recognizer, "anchor_refiner": anchor_refiner, "transition_generator": transition_generator,
@@ -272,8 +273,8 @@ class Refiner:
         that :func:`refiner.core.skeletons.convert` connects with HumanAct12's (``uestc``, ``humanml3d``)
         gets a :class:`~refiner.refinement.converted_refinement.ConvertedRefiner` running the HumanAct12 weights.
         """
-        snap = check_strength(kwargs.pop("concept_snap", 0.0))  # one cached refiner per strength, however written
-        kwargs.update({"concept_snap": snap} if snap else {})
+        for option in ("concept_snap", "misread_snap"):  # one cached refiner per strength, however written
+            kwargs.update({option: snap} if (snap := check_strength(kwargs.pop(option, 0.0), option)) else {})
         with thread_limits(1):  # copying the tensors on one thread: 0.07 s; on two, under load, 0.4-0.6 s
             return copy.deepcopy(_shared_pretrained(cls, skeleton, split, device, kwargs))
 

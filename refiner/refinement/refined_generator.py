@@ -199,8 +199,8 @@ class RefinedGenerator:
 
 
 def _default_refiner(skeleton: str):
-    """``refiner.refinement.pipeline.Refiner.pretrained(skeleton, texture="all")``, or the identity with a warning if
-    unavailable."""
+    """``refiner.refinement.pipeline.Refiner.pretrained(skeleton, **GENERATOR_OPTIONS)`` (every clip through the texture
+    filter, misread clips snapped to their action's concepts), or the identity with a warning if unavailable."""
     try:
         # on first use: the pipeline brings torch and the networks, which `import refiner` must not load
         from refiner.refinement.pipeline import Refiner
@@ -215,7 +215,9 @@ def _default_refiner(skeleton: str):
         )
         return identity_refiner
     try:
-        return pretrained(skeleton, texture="all")  # its clips are all a generator's: the texture filter takes every one
+        from refiner.refinement.inputs import GENERATOR_OPTIONS
+
+        return pretrained(skeleton, **GENERATOR_OPTIONS)  # its clips are all a generator's
     except ValueError as e:
         raise ValueError(f"the default refiner Refiner.pretrained({skeleton!r}) failed: {e} Pass refiner=... "
                          f"to choose one.") from e

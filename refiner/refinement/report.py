@@ -37,6 +37,10 @@ class RefinementReport:
     notes: list[str] = field(default_factory=list)
     #: The noise step found the clip noisy throughout (a generator's texture; the pose prior's second gate).
     noisy_throughout: bool = False
+    #: The action the recognition network reads in the clip (its argmax, the action treated as unknown), and the
+    #: probability it gives the clip's own action; filled where an action was given and ``misread_snap`` is on.
+    recognized_action: int | None = None
+    action_probability: float | None = None
 
     @property
     def changed_frames(self) -> np.ndarray:

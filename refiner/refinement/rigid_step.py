@@ -1,0 +1,59 @@
+"""The refiner's rigid-skeleton step (step 0 and the last step of the learned method): a clip whose bones vary in length
+more than mocap's is put back on rigid bones before the flaw steps judge it, and the frames of a rigid core's clip
+that it kept for them go on the core's lengths at last (:mod:`refiner.core.rigid` does the geometry)."""
+from __future__ import annotations
+
+import numpy as np
+
+from refiner.core.rigid import rigid_skeleton
+from refiner.refinement.pose_prior import drifting_skeleton
+
+__all__ = ["rigid_first", "rigid_at_last"]
+
+
+def rigid_first(refiner, clips: np.ndarray, reports: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``clips (B, T, J, 3)`` float32 put on rigid bones where they vary (``refiner.rigid_tolerance``), each change in
+    its clip's report; returns ``(clips, cored, drifting)``: ``cored (B,)`` the clips whose rigid core kept frames for
+    the flaw steps (:func:`rigid_at_last` puts those on its lengths), ``drifting (B,)`` the clips whose input skeleton
+    deforms slowly throughout (the pose prior's gate), which a clip with exact bones in some frames never does: it was
+    edited in places (a pose blended toward another), and the prior's refit of its every frame moved them."""
+    prior = _proportions(refiner)
+    rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior,
+                                       keep_core=refiner.rigid_core, keep_shortened=refiner.rigid_core)
+    drifting = drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, variation=variations)  # the input's bones
+    lengths = "the clip's median bone lengths" + ("" if prior is None else ", drawn toward human proportions where they drift")
+    out, cored = clips.copy(), np.zeros(len(clips), bool)
+    for b, (report, variation) in enumerate(zip(reports, variations)):  # first the bones: not a motion flaw
+        if variation <= refiner.rigid_tolerance:
+            continue
+        moved = np.flatnonzero((rigid[b] != clips[b]).any((1, 2)))
+        cored[b] = (kept := clips.shape[1] - moved.size) > 0  # only a rigid core's clip keeps frames here
+        if moved.size:
+            where = f"its rigid core's bone lengths ({kept} frames of the core or with bones that only shorten kept for now)"
+            out[b] = rigid[b]
+            report.changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
+                                   f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
+                                   f"0 %); {moved.size} frames put back on {where if kept else lengths}"})
+    return out, cored, drifting & ~cored
+
+
+def rigid_at_last(refiner, clips: np.ndarray, reports: list, cored: np.ndarray) -> np.ndarray:
+    """``clips (B, T, J, 3)`` with the frames the first step kept off the rigid core of the ``cored (B,)`` clips (bones that
+    only shorten) and no repair changed put on the core's bone lengths, each change reported: the output's bones are rigid."""
+    if not cored.any():
+        return clips
+    out = clips.copy()
+    out[cored] = rigid_skeleton(clips[cored], refiner.skeleton, refiner.rigid_tolerance, proportions=_proportions(refiner),
+                                keep_core=True)[0]
+    for b in np.flatnonzero((out != clips).any((1, 2, 3))):
+        moved = np.flatnonzero((out[b] != clips[b]).any((1, 2)))
+        reports[b].changes.append({"start": int(moved[0]), "stop": int(moved[-1]) + 1, "step": "skeleton", "reason":
+                                   f"{moved.size} frames off the clip's rigid core whose bones shortened, which no repair "
+                                   f"changed, put back on the core's bone lengths (moved "
+                                   f"{100 * float(np.linalg.norm(out[b][moved] - clips[b][moved], axis=-1).mean()):.2f} cm on average)"})
+    return out
+
+
+def _proportions(refiner):
+    """The human bone proportions the refiner's rigid lengths lean on, or None (``rigid_lengths="median"``)."""
+    return refiner.bone_proportions if refiner.rigid_lengths == "proportions" else None

@@ -1,0 +1,68 @@
+"""The rigid core of a mocap clip edited in places: exact frames found even when few, blended poses rebuilt from
+the root outward, noise projected."""
+import numpy as np
+import pytest
+
+import refiner.core.rigid as rigid
+from refiner.core.rigid import rigid_core, rigid_skeleton
+from refiner.core.skeletons import bone_lengths
+
+
+def test_a_few_exact_frames_make_a_core_and_near_ones_do_not(rng):
+    base = rng.uniform(0.05, 0.4, 23)
+    u = np.linspace(0, 1, 30)[:, None]
+    blended = base * (1 - 0.6 * (0.5 + u) * np.sin(np.pi * u) ** 2)  # blended toward another pose but at both ends
+    core = rigid_core(blended)
+    assert core is not None and np.array_equal(np.flatnonzero(core), [0, 29])
+    assert rigid_core(blended, exact=None) is None  # the share rule alone: two frames of thirty are too few
+    drifting = base * (1 + 0.05 * u * rng.uniform(-1, 1, 23))  # a generator's slow stretch: no two frames agree
+    assert rigid_core(drifting) is None
+    close = blended.copy()
+    close[29] = close[0] * (1 + 5e-4)  # within the core's tolerance of each other, but not exact: no core
+    assert rigid_core(close) is None
+
+
+def _blended(humanact12):
+    """A held-out clip's 40 frames with every frame but the first and last blended (smoothstep, up to 70 %) toward a
+    pose of another subject's clip, root path kept; and the clean clip."""
+    clip = humanact12[int(np.flatnonzero(humanact12.subjects == 11)[2])].joints[:40].astype(np.float64)
+    donor = humanact12[int(np.flatnonzero(humanact12.subjects == 3)[0])].joints[20].astype(np.float64)
+    u = np.linspace(0, 1, 40)
+    w = 0.7 * (3 * (1 - np.abs(2 * u - 1)) ** 2 - 2 * (1 - np.abs(2 * u - 1)) ** 3)
+    rel = clip - clip[:, :1]
+    edited = clip[:, :1] + (1 - w[:, None, None]) * rel + w[:, None, None] * (donor - donor[:1])
+    return clip, edited
+
+
+@pytest.mark.real_data
+def test_a_blended_pose_is_rebuilt_outward_and_noise_is_projected(humanact12, rng, monkeypatch):
+    clip, edited = _blended(humanact12)
+    assert bone_lengths(edited[[0, -1]], "humanact12").std(0).max() < 1e-6
+    rebuilt, variation = rigid_skeleton(edited, "humanact12", 0.005, keep_core=True)
+    assert variation > 0.05
+    np.testing.assert_array_equal(rebuilt[[0, -1]], edited[[0, -1]])  # the exact frames are the core: kept
+    np.testing.assert_allclose(bone_lengths(rebuilt, "humanact12"), bone_lengths(clip, "humanact12"), rtol=3e-3)
+    err = lambda a: np.linalg.norm(a - clip, axis=-1).mean()  # noqa: E731
+    monkeypatch.setattr(rigid, "BLEND_AUTOCORRELATION", np.inf)
+    projected = rigid_skeleton(edited, "humanact12", 0.005, keep_core=True)[0]
+    assert err(rebuilt) < err(projected) - 0.002, (err(rebuilt), err(projected))  # the blend's directions kept
+    noisy = clip.copy()
+    noisy[10:30] += rng.normal(0, 0.01, noisy[10:30].shape)  # white noise: its bones jump from frame to frame
+    alone = rigid_skeleton(noisy, "humanact12", 0.005, keep_core=True)[0]
+    monkeypatch.undo()
+    np.testing.assert_array_equal(rigid_skeleton(noisy, "humanact12", 0.005, keep_core=True)[0], alone)  # projected
+
+
+@pytest.mark.real_data
+def test_refine_leaves_a_blended_clips_exact_frames_to_the_core_not_the_pose_prior(humanact12):
+    """A clip with exact bones in some frames was edited in places: the pose prior's drift gate, which refits every
+    frame, stays off (it moved the exact frames of the benchmark's wrong anchors), and the output is nearer the
+    clean clip than the edit."""
+    from refiner.refinement.pipeline import Refiner
+
+    clip, edited = _blended(humanact12)
+    out, report = Refiner.pretrained("humanact12", split="train").refine(edited.astype(np.float32), return_report=True)
+    assert "pose" not in [c["step"] for c in report.changes]
+    np.testing.assert_allclose(out[[0, -1]], edited[[0, -1]], atol=1e-5)  # the exact frames stay (a re-timing: < 1e-6)
+    err = lambda a: np.linalg.norm(a - clip, axis=-1).mean()  # noqa: E731
+    assert err(out) < err(edited), (err(out), err(edited))
