@@ -86,7 +86,11 @@ def test_saved_restorer_is_the_same_and_bad_input_is_refused(fitted, tmp_path):
 
 @pytest.mark.real_data
 def test_shipped_refiner_restores_a_damped_clip_and_keeps_a_real_one(humanact12, one_torch_thread):
-    model = Refiner.pretrained("humanact12", split="train")
+    """On for a generator's clips (GENERATOR_OPTIONS), off in refine(), which may be given a calm real person."""
+    from refiner.refinement.inputs import GENERATOR_OPTIONS
+
+    assert Refiner.pretrained("humanact12", split="train").amplitude == "keep"
+    model = Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS)
     assert model.amplitude_restorer is not None and model.amplitude == "restore"
     est = model.amplitude_restorer
     m = next(humanact12[i] for i in np.flatnonzero(humanact12.subjects == 11)  # a clip that moves as real ones do
@@ -99,6 +103,6 @@ def test_shipped_refiner_restores_a_damped_clip_and_keeps_a_real_one(humanact12,
     assert not any(c["step"] == "amplitude" for c in report.changes)
     _, report = model.refine(_damped(x, 0.15).astype(np.float32), return_report=True)  # no action given: not judged
     assert not any(c["step"] == "amplitude" for c in report.changes)
-    kept = Refiner.pretrained("humanact12", split="train", amplitude="keep")
+    kept = Refiner.pretrained("humanact12", split="train")
     _, report = kept.refine(_damped(x, 0.15).astype(np.float32), action=m.action, return_report=True)
     assert not any(c["step"] == "amplitude" for c in report.changes)

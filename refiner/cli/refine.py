@@ -90,9 +90,9 @@ def refine_run(args: argparse.Namespace) -> int:
     if args.concept_snap and args.action is None:  # an inferred action is never snapped to: it would do nothing
         raise ValueError("`--concept-snap` needs `--action`: the anchors are snapped onto that action's concepts.")
     snap = {"concept_snap": args.concept_snap} if args.concept_snap else {}
-    generated = GENERATOR_OPTIONS if args.adapter is not None else {"texture": "off", "misread_snap": 0.0}
-    snap["texture"] = args.texture or generated["texture"]  # an adapter's input is generated
-    snap["misread_snap"] = generated["misread_snap"] if args.misread_snap is None else args.misread_snap
+    snap.update(GENERATOR_OPTIONS if args.adapter is not None else {})  # an adapter's input is generated
+    snap.update({} if args.texture is None else {"texture": args.texture})
+    snap.update({} if args.misread_snap is None else {"misread_snap": args.misread_snap})
     refiner = Refiner.load(args.refiner, **snap) if args.refiner is not None else Refiner.pretrained(skeleton, **snap)
     pm = get_plugin_manager() if args.adapter is not None else None
     if pm is not None:

@@ -99,7 +99,7 @@ class Refiner:
     timing_estimator, noise_filter, amplitude_restorer, pose_prior, texture_filter : optional
         The learned re-timing step (:mod:`refiner.refinement.timing_estimation`), noise filter
         (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead),
-        amplitude step (:mod:`refiner.refinement.amplitude`; ``amplitude="keep"`` skips it), pose prior
+        amplitude step (:mod:`refiner.refinement.amplitude`; "restore" for a generator's clips, the default "keep"), pose prior
         (:mod:`refiner.refinement.pose_prior`; ``posing="keep"`` skips it) and texture filter
         (:mod:`refiner.refinement.texture_filter`, last, on the clips ``texture`` names: "off", the default (a mocap
         clip may be given); "all", every clip, for a generator's clips, as :class:`RefinedGenerator` uses; "auto", those
@@ -151,7 +151,7 @@ class Refiner:
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True, retiming: str | None = None,
-                 denoising: str | None = None, amplitude: str = "restore", posing: str = "prior", texture: str = "off",
+                 denoising: str | None = None, amplitude: str = "keep", posing: str = "prior", texture: str = "off",
                  concept_snap: float = 0.0, misread_snap: float = 0.0,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
