@@ -108,7 +108,10 @@ def test_default_refiner_is_the_pretrained_pipeline(pm, monkeypatch, xyz_options
 
     monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", types.SimpleNamespace(Refiner=FakeRefiner))
     gen = RefinedGenerator(XyzVae(), adapter="action2motion", adapter_options=xyz_options, plugin_manager=pm)
-    assert calls == [("humanact12", {"texture": "all"})] and isinstance(gen.refiner, LiftingRefiner)
+    from refiner.refinement.inputs import GENERATOR_OPTIONS
+
+    assert GENERATOR_OPTIONS["texture"] == "all" and GENERATOR_OPTIONS["misread_snap"] > 0
+    assert calls == [("humanact12", GENERATOR_OPTIONS)] and isinstance(gen.refiner, LiftingRefiner)
 
     class NoWeights:
         @classmethod
