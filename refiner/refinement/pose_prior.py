@@ -134,7 +134,7 @@ class PosePrior(NetworkComponent):
     def __init__(self, *, hidden: int = 256, n_layers: int = 3, max_offset: float = 0.06,
                  clean_probability: float = 0.25, crop: int = 40, rigid_tolerance: float | None = 0.005,
                  window: int = 9, fade: float = 2.0,
-                 schedule: TrainSchedule = TrainSchedule(n_epochs=20, batch_size=64, learning_rate=1e-3, patience=10,
+                 schedule: TrainSchedule = TrainSchedule(n_epochs=100, batch_size=64, learning_rate=1e-3, patience=10,
                                                          steps_per_epoch=200),
                  random_state: int | None = 0):
         self.hidden = hidden
