@@ -22,6 +22,21 @@ def test_a_few_exact_frames_make_a_core_and_near_ones_do_not(rng):
     assert rigid_core(close) is None
 
 
+def test_a_held_pose_is_no_core(rng):
+    """A clip whose bones vary (CMU's processed joints) repeats its lengths exactly where a pose is held; with the
+    poses given, only exact frames that hold different poses make a core."""
+    base = rng.uniform(0.05, 0.4, 23)
+    lengths = base * (1 + 0.02 * rng.standard_normal((30, 23)))
+    poses = np.cumsum(rng.normal(0, 0.01, (30, 24, 3)), axis=0)
+    lengths[10:16], poses[10:16] = lengths[10], poses[10]  # a frozen transition: six copies of one frame
+    assert rigid_core(lengths) is not None  # the lengths alone read the copies as exact mocap
+    assert rigid_core(lengths, poses=poses) is None
+    lengths[25] = lengths[10]  # the same bones in a pose far from the held one: a core again
+    poses[25] = poses[10] + 0.05
+    core = rigid_core(lengths, poses=poses)
+    assert core is not None and core[[10, 25]].all()
+
+
 def _blended(humanact12):
     """A held-out clip's 40 frames with every frame but the first and last blended (smoothstep, up to 70 %) toward a
     pose of another subject's clip, root path kept; and the clean clip."""

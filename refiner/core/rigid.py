@@ -14,7 +14,7 @@ import numpy as np
 from refiner.core.skeletons import bone_lengths, get_skeleton, joint_bone_lengths, with_bone_lengths
 
 __all__ = ["rigid_skeleton", "rigid_core", "BoneProportions", "robust_bone_lengths", "CORE_TOLERANCE", "CORE_SHARE",
-           "REBUILD_BONES", "BLEND_AUTOCORRELATION", "EXACT_TOLERANCE", "EXACT_FRAMES"]
+           "REBUILD_BONES", "BLEND_AUTOCORRELATION", "EXACT_TOLERANCE", "EXACT_FRAMES", "EXACT_SPREAD"]
 
 #: Frames whose bones all lie within this share of one another's lengths form a rigid core (mocap bones
 #: are exact to 1e-5; a frame blended 10 % toward another pose shortens its forearm by about 1 %).
@@ -28,6 +28,10 @@ CORE_SHARE = 0.25
 #: over all but its first and last frames keeps those two exact, and their lengths are the true ones.
 EXACT_TOLERANCE = 1e-4
 EXACT_FRAMES = 2
+#: Metres (mean joint distance): the exact frames must hold poses at least this far apart from the frame they match,
+#: as a blend's two ends do; a held pose or a re-timing that lands near one frame repeats its bones exactly without
+#: being a core (CMU's non-rigid clips with a frozen transition read as cored: their own bench 21.2 -> 8.5 %).
+EXACT_SPREAD = 0.02
 #: A frame off a rigid core with at most this many bones off the core's lengths (a limb's chain: SMPL's arm from
 #: the collar to the hand is 5) is rebuilt from the root outwards, each such bone keeping its direction, so its
 #: children move and its parent stays: a limb stretched or shrunk 10 % over 20 frames (every 2nd clip of subjects
@@ -47,12 +51,15 @@ BLEND_AUTOCORRELATION = 0.8
 
 
 def rigid_core(lengths: np.ndarray, *, tolerance: float = CORE_TOLERANCE, share: float = CORE_SHARE,
-               exact: float | None = EXACT_TOLERANCE, candidates: int = 64) -> np.ndarray | None:
+               exact: float | None = EXACT_TOLERANCE, candidates: int = 64,
+               poses: np.ndarray | None = None) -> np.ndarray | None:
     """``(T,)`` bool: the largest set of frames whose bone lengths ``(T, n_bones)`` all lie within
     ``tolerance`` (relative) of one frame's, if it holds at least ``share`` of the frames, or else the largest
     such set around a frame that :data:`EXACT_FRAMES` frames match within ``exact`` (None: the share alone);
-    else None. The frame is one of ``candidates`` evenly spaced ones (every frame of a clip that short): a
-    core of a quarter of the frames holds some of them, and a long clip costs ``candidates`` passes, not ``T``."""
+    else None. With ``poses`` ``(T, J, 3)`` metres, those exact frames must include one at least
+    :data:`EXACT_SPREAD` from the frame they match (not a held pose). The frame is one of ``candidates`` evenly
+    spaced ones (every frame of a clip that short): a core of a quarter of the frames holds some of them, and a
+    long clip costs ``candidates`` passes, not ``T``."""
     x = np.asarray(lengths, np.float64)
     if x.ndim != 2:
         raise ValueError(f"`lengths` must be (T, n_bones); got shape {x.shape}.")
@@ -62,7 +69,11 @@ def rigid_core(lengths: np.ndarray, *, tolerance: float = CORE_TOLERANCE, share:
         close = (gap <= tolerance).all(-1)
         if close.sum() > best.sum():
             best = close
-        if exact is not None and close.sum() > best_exact.sum() and (gap <= exact).all(-1).sum() >= EXACT_FRAMES:
+        match = (gap <= exact).all(-1) if exact is not None else np.zeros(len(x), bool)
+        if poses is not None and match.sum() >= EXACT_FRAMES:
+            match &= np.linalg.norm(poses - poses[t], axis=-1).mean(-1) >= EXACT_SPREAD
+            match[t] = True
+        if exact is not None and close.sum() > best_exact.sum() and match.sum() >= EXACT_FRAMES:
             best_exact = close
     if best.sum() >= share * len(x):
         return best
@@ -115,7 +126,7 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
         keep = np.zeros((len(target), xb.shape[1]), bool)
         rebuild = np.zeros_like(keep)
         for k, b in enumerate(np.flatnonzero(todo) if keep_core else ()):
-            if (core := rigid_core(lengths[b])) is not None:
+            if (core := rigid_core(lengths[b], poses=xb[b])) is not None:
                 target[k] = np.median(lengths[b][core], axis=0)
                 keep[k] = core | (keep_shortened & (lengths[b] <= target[k] * (1 + CORE_TOLERANCE)).all(-1))
                 dev = np.where(core[:, None], 0.0, lengths[b] / target[k] - 1)
