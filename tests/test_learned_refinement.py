@@ -241,6 +241,20 @@ def test_refine_puts_shortened_bones_back_at_last(humanact12):
     assert any(c["step"] == "skeleton" and "rigid core" in c["reason"] for c in report.changes)
 
 
+def test_a_repair_that_changes_nothing_is_reported_as_kept(humanact12):
+    """A held-out clip time-warped without a stall: its flagged timing run has nothing to re-time, so the report
+    lists no re-timing (it listed one that moved 0.0 cm, and the run's frames were projected as if repaired)."""
+    from refiner.evaluation.flaws import corrupt
+
+    clip = humanact12.split("test").motions[27]
+    warped = corrupt(clip, "time_warp", 2, random_state=27).motion
+    out, report = Refiner.pretrained("humanact12", split="train").refine(warped, action=clip.action,
+                                                                         return_report=True)
+    assert [c["step"] for c in report.changes] == ["skeleton"]
+    assert any("changed nothing; kept" in n for n in report.notes)
+    assert np.linalg.norm(out.joints - warped.joints, axis=-1).mean() < 5e-4  # only shortened bones put back
+
+
 def test_robust_bone_lengths_trust_noise_and_doubt_drift(rng):
     """A bone whose length is noisy keeps its median; one whose length drifts slowly is drawn to its share."""
     prop = BoneProportions(np.array([0.5, 0.3, 0.2]), np.array([0.01, 0.01, 0.01]))
@@ -472,7 +486,15 @@ def test_typed_motion_infill_repair_and_its_stand_in(tiny_learned, humanact12, m
     forced = Refiner.load(out)
     if not with_infiller:
         forced.motion_infiller = None  # weights without it: the repair network's in-fill stands in
-    forced.flaw_classifier.threshold_ = 1e-6  # flag every frame
+    given = forced.flaw_classifier.predict_all
+
+    def flag_middle(x):  # frames 10-29 flagged: an in-fill needs kept frames to in-fill from
+        p = given(x).copy()
+        p[..., 0] = 0.0
+        p[:, 10:30, 0] = 1.0
+        return p
+
+    forced.flaw_classifier.predict_all = flag_middle
     forced.denoising = "flagged"  # the typed repairs alone (not the last step for clips noisy throughout)
     for group in learned_pipeline.TYPED_REPAIRS:
         monkeypatch.setitem(learned_pipeline.TYPED_REPAIRS, group, ("motion_infill", 0))

@@ -351,6 +351,8 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                                     f"(threshold {100 * den_threshold:.2f} cm)")
                 name, (lo, hi), y_new, note = _repair_run(refiner, y, lo, hi, {n: p[k] for n, p in proposals.items()},
                                                           None if groups is None else groups[b], clips[b], skel)
+                if name != "keep" and np.array_equal(y_new, y):  # e.g. a timing run with no stall to re-time
+                    name, note = "keep", f"the {name} repair changed nothing; kept"
                 if name == "keep":
                     report.notes.append(f"frames {lo}-{hi - 1} flagged ({', '.join(evidence)}); {note}")
                     continue
