@@ -1,9 +1,11 @@
 """Hand-written repairs of flagged runs and the planted-feet evidence they use, on real clips."""
 import numpy as np
 import pytest
+from conftest import shared_data_dir
 
 from refiner.core.contact import planted_feet, planted_slip
-from refiner.evaluation.flaws import foot_sliding, frozen_transition, transition_jitter
+from refiner.evaluation.flaws import corrupt, foot_sliding, frozen_transition, transition_jitter
+from refiner.io.datasets import load_cmu_mocap
 from refiner.refinement.pipeline import splice
 from refiner.refinement.repair_candidates import (CANDIDATES, planted_feet_run, smooth_run, spline_run, stall_retime_run,
                                                  stall_window)
@@ -87,6 +89,19 @@ def test_a_rest_nothing_catches_up_with_is_not_retimed(walks):
     frozen = frozen_transition(walks[0], 2, random_state=0)
     lo, hi = _runs(frozen.mask)[0]
     assert not np.array_equal(stall_retime_run(frozen.motion.joints, lo, hi, SKEL), frozen.motion.joints)
+
+
+@pytest.mark.real_data
+def test_a_standing_start_caught_up_with_late_is_not_retimed():
+    """A CMU walk that starts standing and reaches its rush 55 frames later (time-warped there): no stall flaw, kept;
+    the rule before (a rush anywhere later in the run) re-timed the whole clip, 40 cm per frame further from the truth."""
+    clips = [m for m in load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz").split("test")
+             if len(m.joints) >= 120]
+    walk = clips[56].with_joints(clips[56].joints[:120])
+    warped = corrupt(walk, "time_warp", 2, random_state=28).motion.joints
+    skel = get_skeleton("cmu_mocap")
+    np.testing.assert_array_equal(stall_retime_run(warped, 1, 120, skel), warped)
+    assert _err(stall_retime_run(warped, 1, 120, skel, rush_within=None), walk.joints) > 2 * _err(warped, walk.joints)
 
 
 @pytest.mark.real_data

@@ -85,11 +85,18 @@ def retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton) -> np.ndarra
     return retime_path(y, a, b, y[a : b + 1])
 
 
+#: Frames after a stop within which the rush must begin (None: anywhere later in the run): a frozen transition
+#: rushes to its end pose as soon as it moves again, while a rest that the motion leaves slowly (a walk's standing
+#: start) is caught up with only much later, and re-timing over both spread the rest over a CMU walk (+19.7 cm).
+RUSH_WITHIN = 12
+
+
 def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall: float = 0.1,
-                     min_frames: int = 3, rush: float | None = 1.5) -> np.ndarray:
+                     min_frames: int = 3, rush: float | None = 1.5, rush_within: int | None = RUSH_WITHIN) -> np.ndarray:
     """:func:`retime_run` where the run holds still (mean joint speed under ``stall`` of the clip's
-    median for ``min_frames`` frames in a row) and then rushes (over ``rush`` times the median later in
-    the run; None: not asked), else no change. Re-timing a run that never stops moved it further from
+    median for ``min_frames`` frames in a row) and then rushes (over ``rush`` times the median within
+    ``rush_within`` frames after the stop ends, None: anywhere later in the run; ``rush=None``: not asked),
+    else no change. Re-timing a run that never stops moved it further from
     the truth (time warps) while it cured stalls; a stop that nothing catches up with afterwards is a
     rest (the still end of a clip), and spreading the motion over it cost one clip 4.7 cm."""
     speed, median = frame_speed(y)
@@ -99,7 +106,10 @@ def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall:
     if not run.size or run.max() < min_frames:
         return y.copy()
     stalled = int(np.argmax(run >= min_frames)) + min_frames  # just after the first stop
-    if rush is not None and not (window[stalled:] > rush * median).any():
+    while stalled < len(window) and still[stalled]:
+        stalled += 1  # just after the first stop ends
+    after = window[stalled:] if rush_within is None else window[stalled : stalled + rush_within]
+    if rush is not None and not (after > rush * median).any():
         return y.copy()
     return retime_run(y, lo, hi, skeleton)
 
