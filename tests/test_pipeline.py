@@ -283,3 +283,35 @@ def test_cmu_weights_refine_real_cmu_clips_single_and_batch_with_reports():
     fixed = refine(flawed, skeleton="cmu_mocap", refiner=model)
     err = lambda x: np.linalg.norm(x - clips[1].joints, axis=-1).mean()  # noqa: E731
     assert err(fixed) < err(flawed)
+
+
+def test_cmu_clips_keep_their_own_bones_where_no_step_changed_them():
+    """CMU's processed joints are not rigid (bones vary up to 5.5 % in the calibration subjects' clean clips, the
+    weights' ``natural_bones``): the flaw steps judge rigid bones, but a clean held-out clip comes back exactly as
+    given, and a frozen transition's repair changes its own frames while the frames no step changed keep their bones."""
+    from conftest import shared_data_dir
+
+    from refiner.core.rigid import bone_variation
+    from refiner.evaluation.flaws import corrupt
+    from refiner.io.datasets import load_cmu_mocap
+
+    test = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz").split("test")
+    clips = [m.with_joints(m.joints[:120]) for m in test if m.n_frames >= 120][::8]
+    model = Refiner.pretrained("cmu_mocap", split="train")
+    assert 0.05 < model.natural_bones < 0.06
+    batch = np.stack([m.joints for m in clips])
+    out, reports = model.refine(batch, return_report=True)
+    given_back = [np.array_equal(o, x) for o, x in zip(out, batch)]
+    assert sum(given_back) >= len(clips) - 1 and all(0.005 < bone_variation(x, "cmu_mocap") for x in batch)
+    assert all(r.changes == [] and any("bones are as given" in n for n in r.notes)
+               for r, same in zip(reports, given_back) if same)
+    rigid = Refiner.pretrained("cmu_mocap", split="train", natural_bones=0).refine(batch)  # the previous release
+    assert not any(np.array_equal(o, x) for o, x in zip(rigid, batch))
+    flawed = corrupt(clips[1], "frozen_transition", 2, random_state=0)
+    fixed, report = model.refine(flawed.motion.joints, return_report=True)
+    kept = (fixed == flawed.motion.joints).all((1, 2))
+    assert kept.sum() > 60 and not kept[flawed.mask].all()
+    err = lambda x: np.linalg.norm(x - clips[1].joints, axis=-1).mean()  # noqa: E731
+    assert err(fixed) < err(flawed.motion.joints)
+    with pytest.raises(ValueError, match="natural_bones"):
+        Refiner.pretrained("cmu_mocap", split="train", natural_bones=1.5)

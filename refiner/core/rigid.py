@@ -13,7 +13,7 @@ import numpy as np
 
 from refiner.core.skeletons import bone_lengths, get_skeleton, joint_bone_lengths, with_bone_lengths
 
-__all__ = ["rigid_skeleton", "rigid_core", "BoneProportions", "robust_bone_lengths", "CORE_TOLERANCE", "CORE_SHARE",
+__all__ = ["rigid_skeleton", "rigid_core", "bone_variation", "BoneProportions", "robust_bone_lengths", "CORE_TOLERANCE", "CORE_SHARE",
            "REBUILD_BONES", "BLEND_AUTOCORRELATION", "EXACT_TOLERANCE", "EXACT_FRAMES", "EXACT_SPREAD"]
 
 #: Frames whose bones all lie within this share of one another's lengths form a rigid core (mocap bones
@@ -80,6 +80,19 @@ def rigid_core(lengths: np.ndarray, *, tolerance: float = CORE_TOLERANCE, share:
     return best_exact if best_exact.any() else None
 
 
+def _worst_variation(lengths: np.ndarray) -> np.ndarray:
+    """``(B,)``: the largest std / mean over time of the bone lengths ``(B, T, n_bones)``."""
+    return (lengths.std(1) / np.maximum(lengths.mean(1), 1e-9)).max(-1)
+
+
+def bone_variation(joints: np.ndarray, skeleton: str) -> float | np.ndarray:
+    """The worst bone's length variation (std / mean over the frames) of ``joints (T, J, 3)`` metres, or ``(B,)`` for
+    ``(B, T, J, 3)``: 0 for mocap's rigid bones; what :func:`rigid_skeleton` compares with its tolerance."""
+    x = np.asarray(joints)
+    variation = _worst_variation(bone_lengths(x[None] if x.ndim == 3 else x, skeleton))
+    return float(variation[0]) if x.ndim == 3 else variation
+
+
 def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, iterations: int = 60,
                    bones: np.ndarray | None = None, proportions: "BoneProportions | None" = None,
                    keep_core: bool = False, keep_shortened: bool = False) -> tuple[np.ndarray, float | np.ndarray]:
@@ -116,7 +129,7 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
     if not use.any():
         return joints, (0.0 if single else np.zeros(len(xb)))
     lengths = lengths[..., use]
-    variation = (lengths.std(1) / np.maximum(lengths.mean(1), 1e-9)).max(-1)  # (B,)
+    variation = _worst_variation(lengths)  # (B,)
     todo = variation > tolerance
     out = xb.copy() if todo.any() else xb
     if todo.any():

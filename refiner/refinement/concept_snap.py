@@ -31,13 +31,14 @@ from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 __all__ = ["snap_to_concepts", "snapped_to_concepts", "check_strength", "check_snaps", "facing", "turned"]
 
 
-def check_strength(strength, name: str = "concept_snap") -> float:
-    """``strength`` as a float in [0, 1]; ValueError naming the option ``name`` otherwise (bools and strings too)."""
+def check_strength(strength, name: str = "concept_snap", meaning: str = "the share of the way onto the concept") -> float:
+    """``strength`` as a float in [0, 1]; ValueError naming the option ``name`` (and what it means) otherwise (bools
+    and strings too)."""
     if isinstance(strength, (bool, np.bool_)) or not isinstance(strength, (int, float, np.integer, np.floating)):
         raise ValueError(f"`{name}` must be a number in [0, 1]; got {strength!r}.")
     value = float(strength)
     if not 0.0 <= value <= 1.0:
-        raise ValueError(f"`{name}` must be in [0, 1] (the share of the way onto the concept); got {strength!r}.")
+        raise ValueError(f"`{name}` must be in [0, 1] ({meaning}); got {strength!r}.")
     return value
 
 

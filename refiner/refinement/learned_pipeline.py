@@ -35,7 +35,7 @@ from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
 from refiner.refinement.retrace import cut_retraces
-from refiner.refinement.rigid_step import rigid_at_last, rigid_first
+from refiner.refinement.rigid_step import natural_bones_back, rigid_at_last, rigid_first
 from refiner.refinement.noise_filter import filtered_noise
 from refiner.refinement.pose_prior import prior_posed
 from refiner.refinement.timing_estimation import estimated_retiming
@@ -257,7 +257,8 @@ def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
 
 def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
-    clips, cored, drifting = rigid_first(refiner, clips, reports)
+    given, (clips, cored, drifting) = clips, rigid_first(refiner, clips, reports)
+    rigid = clips
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it
     clips = estimated_retiming(refiner, clips, reports, mode)  # timing first
     use_rec, use_cor, use_clf, use_den = (n in refiner.detect.split("+") for n in ("recognizer", "correction", "classifier", "denoiser"))
@@ -372,5 +373,5 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
     out = filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)
-    return rigid_at_last(refiner, out, reports, cored)
+    return natural_bones_back(refiner, rigid_at_last(refiner, out, reports, cored), given, rigid, reports)
 

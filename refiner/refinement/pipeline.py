@@ -41,6 +41,7 @@ from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.report import RefinementReport
+from refiner.refinement.rigid_step import NATURAL_BONES_KEY
 from refiner.refinement.splicing import project_bone_lengths, splice
 from refiner.refinement.transition_refinement import TransitionRefiner
 from refiner.refinement.timing_estimation import TimingEstimator
@@ -48,24 +49,12 @@ from refiner.refinement.transition_retiming import TransitionRetimer
 
 __all__ = ["Refiner", "RefinementReport", "refine", "MODES", "splice", "project_bone_lengths"]
 
-_PARTS = {
-    "recognizer": AnchorRecognizer,
-    "anchor_refiner": AnchorRefiner,
-    "transition_generator": TransitionGenerator,
-    "transition_refiner": TransitionRefiner,
-    "anchor_concepts": AnchorConcepts,
-    "anchor_quality": AnchorQuality,
-    "flaw_recognizer": FlawRecognizer,
-    "flaw_repairer": FlawRepairer,
-    "flaw_classifier": FlawClassifier,
-    "flaw_denoiser": FlawDenoiser,
-    "motion_infiller": MotionInfiller,
-    "timing_estimator": TimingEstimator,
-    "noise_filter": NoiseFilter,
-    "amplitude_restorer": AmplitudeRestorer,
-    "pose_prior": PosePrior,
-    "texture_filter": TextureFilter,
-}
+_PARTS = {"recognizer": AnchorRecognizer, "anchor_refiner": AnchorRefiner, "transition_generator": TransitionGenerator,
+          "transition_refiner": TransitionRefiner, "anchor_concepts": AnchorConcepts, "anchor_quality": AnchorQuality,
+          "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer, "flaw_classifier": FlawClassifier,
+          "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator,
+          "noise_filter": NoiseFilter, "amplitude_restorer": AmplitudeRestorer, "pose_prior": PosePrior,
+          "texture_filter": TextureFilter}
 _NO_DEVICE = ("anchor_concepts", "anchor_quality", "amplitude_restorer")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 #: Thresholds a manifest's ``calibration`` entry may hold; they belong to the steps, which save them.
@@ -122,6 +111,10 @@ class Refiner:
     rigid_core : bool, default=True
         The flaw steps see a clip's rigid core and its frames whose bones only shorten as given; the last step puts the
         latter on the core's lengths (:func:`~refiner.core.rigid.rigid_skeleton`); False: all projected first (the previous release).
+    natural_bones : float, optional
+        A clip whose bones vary no more than this (std / mean) gets its given frames back where no step after the rigid
+        one changed them (:func:`~refiner.refinement.rigid_step.natural_bones_back`); default: the weights'
+        ``manifest["learned"]["natural_bone_variation"]`` (CMU's processed joints: 5.5 %), else 0 (off; mocap's are exact).
     quality, anchor_method, transition_method, anchor_noise
         Options of the concepts method, see :mod:`refiner.refinement.concepts_pipeline`: ``quality`` in
         {"pose", "encoder"}, ``anchor_method`` in {"posterior", "concept"}, ``transition_method`` in
@@ -150,7 +143,7 @@ class Refiner:
                  amplitude_restorer=None, pose_prior=None, texture_filter=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
-                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True, retiming: str | None = None,
+                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True, natural_bones: float | None = None, retiming: str | None = None,
                  denoising: str | None = None, amplitude: str = "keep", posing: str = "prior", texture: str = "off",
                  concept_snap: float = 0.0, misread_snap: float = 0.0,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
@@ -194,6 +187,8 @@ class Refiner:
         self.action_names = tuple(action_names)
         self.mode = check_choice("mode", mode, MODES)
         self.manifest = manifest or {}
+        self.natural_bones = check_strength(self.manifest.get("learned", {}).get(NATURAL_BONES_KEY, 0.0) if natural_bones
+                                            is None else natural_bones, "natural_bones", "a bone-length std / mean")
         calibration = self.manifest.get("calibration", {})
         if anchor_quality is not None and "anchor_threshold" in calibration:  # a copy: the given part stays as it is
             anchor_quality = copy.copy(anchor_quality)

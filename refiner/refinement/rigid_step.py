@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from refiner.core.rigid import rigid_skeleton
+from refiner.core.rigid import bone_variation, rigid_skeleton
 from refiner.refinement.pose_prior import drifting_skeleton
 
-__all__ = ["rigid_first", "rigid_at_last"]
+__all__ = ["rigid_first", "rigid_at_last", "natural_bones_back", "NATURAL_BONES_KEY"]
+
+#: The manifest entry (``manifest["learned"]``) of the bone variation the weights' own clean data shows.
+NATURAL_BONES_KEY = "natural_bone_variation"
 
 
 def rigid_first(refiner, clips: np.ndarray, reports: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -51,6 +54,29 @@ def rigid_at_last(refiner, clips: np.ndarray, reports: list, cored: np.ndarray) 
                                    f"{moved.size} frames off the clip's rigid core whose bones shortened, which no repair "
                                    f"changed, put back on the core's bone lengths (moved "
                                    f"{100 * float(np.linalg.norm(out[b][moved] - clips[b][moved], axis=-1).mean()):.2f} cm on average)"})
+    return out
+
+
+def natural_bones_back(refiner, clips: np.ndarray, given: np.ndarray, rigid: np.ndarray, reports: list) -> np.ndarray:
+    """``clips (B, T, J, 3)`` (refined) with the ``given`` frames back where the clip's bones vary no more than
+    ``refiner.natural_bones`` (the weights' clean data's own variation: CMU's processed joints, up to 5.5 %) and no
+    step after the first (``rigid``: its output) changed the frame. The flaw steps judge rigid bones, as they were
+    trained; the output keeps the bones the data have, so a clean clip comes back as given."""
+    if not refiner.natural_bones:
+        return clips
+    out = clips.copy()
+    variation = bone_variation(given, refiner.skeleton)
+    for b in np.flatnonzero((variation <= refiner.natural_bones) & (rigid != given).any((1, 2, 3))):
+        same = (clips[b] == rigid[b]).all((1, 2)) & (rigid[b] != given[b]).any((1, 2))
+        out[b][same] = given[b][same]
+        first = next(c for c in reports[b].changes if c["step"] == "skeleton")
+        words = (f"bones varying {100 * variation[b]:.1f} % (std / mean), within the weights' data's own "
+                 f"{100 * refiner.natural_bones:.1f} %: {int(same.sum())} frames no later step changed given back")
+        if same.sum() == (rigid[b] != given[b]).any((1, 2)).sum():
+            reports[b].changes.remove(first)
+            reports[b].notes.append(f"{words}, so their bones are as given")
+        else:
+            first["reason"] += f"; {words}"
     return out
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.segmentation import segment
+from refiner.core.rigid import bone_variation
 from refiner.core.skeletons import BoneProportions, convert
 from refiner.io.datasets import MotionDataset
 from refiner.refinement.flaw_classifier import FlawClassifier
@@ -25,6 +26,7 @@ from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
 from refiner.refinement.pipeline import _WEIGHTS, Refiner
 from refiner.refinement.pose_prior import PosePrior
+from refiner.refinement.rigid_step import NATURAL_BONES_KEY
 from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.timing_estimation import TimingEstimator
 
@@ -255,7 +257,8 @@ def bone_proportion_records(data: MotionDataset) -> dict:
 
 def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all", clip_rate: float = CLIP_RATE) -> dict:
     """Set both flaw thresholds on the clean clips of the split's held-out subjects (:func:`calibration_split`):
-    each detector flags at most ``clip_rate`` of them. Returns the thresholds."""
+    each detector flags at most ``clip_rate`` of them; and the bone variation their clean clips reach (the refiner gives
+    a clip within it its own bones back, ``Refiner(natural_bones=)``). Returns the thresholds."""
     data = dataset.split(split)
     held = np.flatnonzero(calibration_split(data.subjects))
     clips, actions = [data.motions[i].joints for i in held], data.actions[held]
@@ -272,4 +275,5 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
                 clips, quantile=POSE_QUANTILE, texture_quantile=POSE_TEXTURE_QUANTILE))) if "pose_prior" in parts else {}),
             **(dict(zip(("amplitude_gate", "amplitude_target"), parts["amplitude_restorer"].calibrate(
                 clips, actions, clip_rate=AMPLITUDE_CLIP_RATE))) if "amplitude_restorer" in parts else {}),
+            NATURAL_BONES_KEY: max(bone_variation(data.motions[i].joints, data.motions[i].skeleton) for i in held),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}
