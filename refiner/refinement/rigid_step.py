@@ -68,6 +68,8 @@ def natural_bones_back(refiner, clips: np.ndarray, given: np.ndarray, rigid: np.
     variation = bone_variation(given, refiner.skeleton)
     for b in np.flatnonzero((variation <= refiner.natural_bones) & (rigid != given).any((1, 2, 3))):
         same = (clips[b] == rigid[b]).all((1, 2)) & (rigid[b] != given[b]).any((1, 2))
+        if not same.any():  # every frame the rigid step moved was changed again by a flaw step
+            continue
         out[b][same] = given[b][same]
         first = next(c for c in reports[b].changes if c["step"] == "skeleton")
         words = (f"bones varying {100 * variation[b]:.1f} % (std / mean), within the weights' data's own "
