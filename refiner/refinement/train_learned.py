@@ -275,5 +275,6 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
                 clips, quantile=POSE_QUANTILE, texture_quantile=POSE_TEXTURE_QUANTILE))) if "pose_prior" in parts else {}),
             **(dict(zip(("amplitude_gate", "amplitude_target"), parts["amplitude_restorer"].calibrate(
                 clips, actions, clip_rate=AMPLITUDE_CLIP_RATE))) if "amplitude_restorer" in parts else {}),
-            NATURAL_BONES_KEY: max(bone_variation(data.motions[i].joints, data.motions[i].skeleton) for i in held),
+            NATURAL_BONES_KEY: min(1.0, max(bone_variation(data.motions[i].joints, data.motions[i].skeleton)
+                                            for i in held)),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}
