@@ -45,6 +45,7 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert again.timing_estimator is not None and again.retiming == "estimated"
     assert again.noise_filter is not None and again.denoising == "filter" and again.noise_filter.half_width == 1
     assert again.manifest["learned"]["noise_threshold_m"] == pytest.approx(again.noise_filter.threshold_)
+    assert 0 < again.natural_bones == again.manifest["learned"]["natural_bone_variation"] < 1e-4  # mocap's exact bones
     assert again.amplitude_restorer is not None and 0 < again.amplitude_restorer.gate_ < 1
     assert again.manifest["learned"]["amplitude_gate"] == pytest.approx(again.amplitude_restorer.gate_)
     assert again.pose_prior is not None and again.pose_prior.hidden == 8 and again.posing == "prior"

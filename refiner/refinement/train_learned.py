@@ -230,7 +230,7 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
     parts = train_learned(dataset, out, split=split, only=only, **kwargs)
     if only is not None:
         return None
-    calibrate_learned(parts, dataset, split=split)
+    natural = calibrate_learned(parts, dataset, split=split)[NATURAL_BONES_KEY]  # the parts keep their thresholds
     if base is None:
         base = _WEIGHTS / (f"{dataset.name}" + ("" if split == "all" else f"-{split}"))
     info = {}
@@ -239,7 +239,7 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
         if log_path.is_file():
             info[name] = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"}
     return install_learned(base, parts, out=out, info={"split": split, **bone_proportion_records(dataset.split(split)),
-                                                        **info})
+                                                        NATURAL_BONES_KEY: natural, **info})
 
 
 def bone_proportion_records(data: MotionDataset) -> dict:
