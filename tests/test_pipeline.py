@@ -315,3 +315,27 @@ def test_cmu_clips_keep_their_own_bones_where_no_step_changed_them():
     assert err(fixed) < err(flawed.motion.joints)
     with pytest.raises(ValueError, match="natural_bones"):
         Refiner.pretrained("cmu_mocap", split="train", natural_bones=1.5)
+
+
+def test_natural_bones_keep_rigid_frames_next_to_a_repair():
+    """Frames within ``blend`` of a frame a flaw step changed stay on the rigid bones the repair was joined to (given
+    back, their bones jumped 1.3-4 % at the join); the report's skeleton entry then covers only the frames kept rigid."""
+    from types import SimpleNamespace
+
+    from refiner.refinement.report import RefinementReport
+    from refiner.refinement.rigid_step import natural_bones_back
+
+    rng = np.random.default_rng(0)
+    given = np.cumsum(rng.normal(0, 0.01, (1, 40, 24, 3)), axis=1).astype(np.float32)
+    rigid = given + np.float32(0.001)  # the rigid step moved every frame a little
+    refined = rigid.copy()
+    refined[0, 20:23] += np.float32(0.05)  # a repair of frames 20-22
+    report = RefinementReport(mode="full", n_frames=40)
+    report.changes.append({"start": 0, "stop": 40, "step": "skeleton", "reason": "bones put back"})
+    owner = SimpleNamespace(natural_bones=1.0, skeleton="humanact12", blend=4)
+    out = natural_bones_back(owner, refined, given, rigid, [report])
+    back = (out[0] == given[0]).all((1, 2))
+    assert back[:16].all() and back[27:].all() and not back[16:27].any()
+    np.testing.assert_array_equal(out[0, 20:23], refined[0, 20:23])
+    assert (report.changes[0]["start"], report.changes[0]["stop"]) == (16, 27)
+    assert natural_bones_back(SimpleNamespace(natural_bones=0.0), refined, given, rigid, [report]) is refined

@@ -105,6 +105,19 @@ def test_a_standing_start_caught_up_with_late_is_not_retimed():
 
 
 @pytest.mark.real_data
+def test_a_frozen_stall_after_a_slow_start_is_still_retimed(walks):
+    """Every stop of the run is asked for its rush, not the first alone: a clip that rests first and only speeds up
+    slowly, then freezes a transition and rushes, is re-timed."""
+    from refiner.refinement.repair_candidates import RUSH_WITHIN, frame_speed
+
+    frozen = frozen_transition(walks[5], 2, random_state=0).motion.joints
+    y = np.concatenate([np.repeat(frozen[:1], 8, 0), frozen])  # a rest at the start
+    speed, median = frame_speed(y)
+    assert not (speed[8 : 8 + RUSH_WITHIN] > 1.5 * median).any()  # the first stop is caught up with late
+    assert not np.array_equal(stall_retime_run(y, 0, len(y), SKEL), y)
+
+
+@pytest.mark.real_data
 def test_stall_window_reaches_over_the_stall_and_the_rush(walks):
     flawed_growth, clean_growth, covered = [], [], []
     for i, m in enumerate(walks):

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.interpolate import make_smoothing_spline
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, label
 
 from refiner.concepts.transitions import arc_length_profile
 from refiner.core.contact import planted_slip
@@ -95,21 +95,19 @@ def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall:
                      min_frames: int = 3, rush: float | None = 1.5, rush_within: int | None = RUSH_WITHIN) -> np.ndarray:
     """:func:`retime_run` where the run holds still (mean joint speed under ``stall`` of the clip's
     median for ``min_frames`` frames in a row) and then rushes (over ``rush`` times the median within
-    ``rush_within`` frames after the stop ends, None: anywhere later in the run; ``rush=None``: not asked),
+    ``rush_within`` frames after a stop ends, None: anywhere later in the run; ``rush=None``: not asked),
     else no change. Re-timing a run that never stops moved it further from
     the truth (time warps) while it cured stalls; a stop that nothing catches up with afterwards is a
     rest (the still end of a clip), and spreading the motion over it cost one clip 4.7 cm."""
     speed, median = frame_speed(y)
     window = speed[max(lo - 1, 0) : hi]
     still = window < stall * median
-    run = np.convolve(still.astype(int), np.ones(min_frames, int), mode="valid")
-    if not run.size or run.max() < min_frames:
+    stops, n_stops = label(still)
+    ends = [int(np.flatnonzero(stops == k)[-1]) + 1 for k in range(1, n_stops + 1) if (stops == k).sum() >= min_frames]
+    if not ends:
         return y.copy()
-    stalled = int(np.argmax(run >= min_frames)) + min_frames  # just after the first stop
-    while stalled < len(window) and still[stalled]:
-        stalled += 1  # just after the first stop ends
-    after = window[stalled:] if rush_within is None else window[stalled : stalled + rush_within]
-    if rush is not None and not (after > rush * median).any():
+    if rush is not None and not any(((window[e:] if rush_within is None else window[e : e + rush_within]) > rush * median
+                                     ).any() for e in ends):  # some stop must be caught up with (soon)
         return y.copy()
     return retime_run(y, lo, hi, skeleton)
 
