@@ -265,6 +265,7 @@ def test_cmu_weights_refine_real_cmu_clips_single_and_batch_with_reports():
 
     from refiner.evaluation.flaws import corrupt
     from refiner.io.datasets import load_cmu_mocap
+    from refiner.refinement import rigid_step
 
     test = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz").split("test")
     clips = [m.with_joints(m.joints[:80]) for m in test if m.n_frames >= 80][:12:4]
@@ -285,7 +286,7 @@ def test_cmu_weights_refine_real_cmu_clips_single_and_batch_with_reports():
     assert err(fixed) < err(flawed)
 
 
-def test_cmu_clips_keep_their_own_bones_where_no_step_changed_them():
+def test_cmu_clips_keep_their_own_bones_where_no_step_changed_them(monkeypatch):
     """CMU's processed joints are not rigid (bones vary up to 5.5 % in the calibration subjects' clean clips, the
     weights' ``natural_bones``): the flaw steps judge rigid bones, but a clean held-out clip comes back exactly as
     given, and a frozen transition's repair changes its own frames while the frames no step changed keep their bones."""
@@ -294,6 +295,7 @@ def test_cmu_clips_keep_their_own_bones_where_no_step_changed_them():
     from refiner.core.rigid import bone_variation
     from refiner.evaluation.flaws import corrupt
     from refiner.io.datasets import load_cmu_mocap
+    from refiner.refinement import rigid_step
 
     test = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz").split("test")
     clips = [m.with_joints(m.joints[:120]) for m in test if m.n_frames >= 120][::8]
@@ -313,6 +315,15 @@ def test_cmu_clips_keep_their_own_bones_where_no_step_changed_them():
     assert kept.sum() > 60 and not kept[flawed.mask].all()
     err = lambda x: np.linalg.norm(x - clips[1].joints, axis=-1).mean()  # noqa: E731
     assert err(fixed) < err(flawed.motion.joints)
+    # noise takes a clip over the natural variation: its noisy frames stay rigid, most others come back as given
+    noisy = corrupt(clips[2], "transition_jitter", 2, random_state=0)
+    assert bone_variation(noisy.motion.joints, "cmu_mocap") > model.natural_bones
+    fixed = model.refine(noisy.motion.joints)
+    kept = (fixed == noisy.motion.joints).all((1, 2))
+    assert kept[~noisy.mask].sum() > 40 and not kept[noisy.mask].any()
+    err = lambda x: np.linalg.norm(x - clips[2].joints, axis=-1).mean()  # noqa: E731
+    monkeypatch.setattr(rigid_step, "NATURAL_FRAME_BAND", None)  # the release before: the whole clip rigid
+    assert err(fixed) < 0.95 * err(model.refine(noisy.motion.joints))
     with pytest.raises(ValueError, match="natural_bones"):
         Refiner.pretrained("cmu_mocap", split="train", natural_bones=1.5)
 
@@ -339,3 +350,36 @@ def test_natural_bones_keep_rigid_frames_next_to_a_repair():
     np.testing.assert_array_equal(out[0, 20:23], refined[0, 20:23])
     assert (report.changes[0]["start"], report.changes[0]["stop"]) == (16, 27)
     assert natural_bones_back(SimpleNamespace(natural_bones=0.0), refined, given, rigid, [report]) is refined
+
+
+def test_a_clip_over_the_natural_variation_gets_back_its_frames_inside_the_band(monkeypatch):
+    """A flaw that stretches a limb in frames 20-24 takes the clip's bones over the weights' natural variation: the
+    stretched frames (and ``blend`` frames round them) stay rigid, every other frame no later step changed comes
+    back as given; with ``NATURAL_FRAME_BAND = None`` (the release before) the whole clip stays rigid."""
+    from types import SimpleNamespace
+
+    from refiner.core.rigid import bone_variation
+    from refiner.refinement import rigid_step
+    from refiner.refinement.report import RefinementReport
+
+    rng = np.random.default_rng(1)
+    skel = get_skeleton("humanact12")
+    pose = np.zeros((skel.n_joints, 3))
+    for j, parent in enumerate(skel.parents):
+        if parent >= 0:
+            pose[j] = pose[parent] + 0.1 * rng.normal(size=3) / np.sqrt(3)
+    given = np.repeat(pose[None, None].astype(np.float32), 40, axis=1)
+    given = given + np.cumsum(rng.normal(0, 0.002, (1, 40, 1, 3)), axis=1).astype(np.float32)  # a walking root
+    given[0, 20:25, 20:] *= np.float32(1.4)  # the wrists and hands pulled away from the origin: their bones stretch
+    owner = SimpleNamespace(natural_bones=0.01, skeleton="humanact12", blend=4)
+    assert bone_variation(given[0], "humanact12") > owner.natural_bones
+    rigid = given + np.float32(0.001)
+    report = RefinementReport(mode="full", n_frames=40)
+    report.changes.append({"start": 0, "stop": 40, "step": "skeleton", "reason": "bones put back"})
+    out = rigid_step.natural_bones_back(owner, rigid.copy(), given, rigid, [report])
+    back = (out[0] == given[0]).all((1, 2))
+    assert back[:16].all() and back[29:].all() and not back[16:29].any()
+    assert (report.changes[0]["start"], report.changes[0]["stop"]) == (16, 29)
+    assert "within 3.0 % of the clip's medians" in report.changes[0]["reason"]
+    monkeypatch.setattr(rigid_step, "NATURAL_FRAME_BAND", None)
+    np.testing.assert_array_equal(rigid_step.natural_bones_back(owner, rigid.copy(), given, rigid, [report]), rigid)
