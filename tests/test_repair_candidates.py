@@ -203,3 +203,23 @@ def test_noise_runs_are_smoothed_where_noisier_than_their_clip(rng, local, expec
     name, _, out, note = lp._repair_run(refiner, y, 10, 20, {}, groups, y, SKEL)
     assert name == expected and np.array_equal(out, y) == (expected == "keep")
     assert expected == "smooth" or "no noisier than the rest of the clip" in note
+
+
+def test_windows_do_not_grow_over_a_jump_in_the_recording(monkeypatch):
+    """A whole-body jump (:func:`teleports`: 18 HumanAct12 clips have one) is no rush: a window stops before it,
+    and a path that holds it is not re-timed (the jump was spread over the re-timed frames: +1.2 m on one
+    held-out clip)."""
+    from refiner.refinement import repair_candidates
+    from refiner.refinement.repair_candidates import retime_path, teleports
+
+    step = np.full(39, 0.01)
+    step[19:26] = 0.03  # a rush
+    step[26] = 0.5  # the jump: 50 times the median step
+    y = np.zeros((40, 3, 3))
+    y[1:, :, 0] = np.cumsum(step)[:, None]
+    assert np.flatnonzero(teleports(y)).tolist() == [26]
+    assert stall_window(y, 15, 20) == (15, 27)
+    np.testing.assert_array_equal(retime_path(y, 10, 30, y[10:31]), y)
+    assert not np.array_equal(retime_path(y, 10, 25, y[10:26]), y)
+    monkeypatch.setattr(repair_candidates, "GLITCH", np.inf)  # the release before: grown over the jump
+    assert stall_window(y, 15, 20) == (15, 28)

@@ -173,3 +173,18 @@ def test_seeded_reversals_of_real_clips_are_cut_and_come_closer(humanact12, mode
     assert np.mean(refined) < 0.8 * before
     off = [stalls_only.refine(f, action=m.action, return_report=True)[1] for f, m in zip(flawed[:6], clips[:6])]
     assert not any(c.get("repair") == "retrace_cut" for r in off for c in r.changes)
+
+
+@pytest.mark.real_data
+def test_a_jump_in_the_recording_is_not_spread_over_a_cut(humanact12, model):
+    """Held-out clip 146 teleports its root 1.2 m between frames 31 and 32, right after a seeded reversal's rush:
+    the cut's window stops before the jump, and no frame ends up more than 30 cm from the clean clip (122 cm when
+    the window grew over it)."""
+    from refiner.concepts.segmentation import segment
+
+    clips = humanact12.split("test").motions
+    clean = clips[146]
+    flawed = reversed_transition(clean, 2, random_state=146, segmentation=segment(clean.joints)).motion  # bench flaws'
+    out, report = model.refine(flawed, action=clean.action, return_report=True)
+    assert any(c.get("repair") == "retrace_cut" and c["stop"] <= 32 for c in report.changes)
+    assert np.linalg.norm(out.joints - clean.joints, axis=-1).mean(-1).max() < 0.3

@@ -28,7 +28,7 @@ from refiner.concepts.transitions import arc_length_profile
 from refiner.core.contact import planted_slip
 from refiner.core.skeletons import Skeleton
 
-__all__ = ["frame_speed", "speed_profile", "resample_path", "retime_path", "stall_window", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
+__all__ = ["frame_speed", "speed_profile", "resample_path", "retime_path", "stall_window", "teleports", "GLITCH", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
            "CANDIDATES"]
 
 
@@ -66,10 +66,34 @@ def resample_path(frames: np.ndarray, progress: np.ndarray, target: np.ndarray) 
     return frames[i0] * (1 - w) + frames[i1] * w
 
 
+#: A step whose body (the mean of its joints) moves more than this many times the clip's median speed (mean joint
+#: speed) while its pose about that mean moves less than half as far is a jump in the recording: the whole body
+#: teleports (18 of HumanAct12's 1,191 clips have one). A re-timing window is not grown over it, and a path holding
+#: one is not re-timed: the re-timed frames would spread the jump along the path (one held-out clip's retrace cut
+#: and stall re-timing did so: +1.2 m at the window's end, 23.6 cm over the clip).
+GLITCH = 10.0
+#: ... and at least this many metres (6 m/s at 20 frames a second): a clip that mostly stands still has a small median.
+GLITCH_METRES = 0.3
+
+
+def teleports(y: np.ndarray, median: float | None = None) -> np.ndarray:
+    """``(T - 1,)`` bool: the steps of ``y (T, J, 3)`` metres where the whole body jumps (:data:`GLITCH`);
+    ``median``: the speed to compare with (default ``y``'s own median, :func:`frame_speed`)."""
+    x = np.asarray(y, np.float64)
+    median = frame_speed(x)[1] if median is None else median
+    centre = x.mean(-2, keepdims=True)
+    body = np.linalg.norm(np.diff(centre[:, 0], axis=0), axis=-1)
+    pose = np.linalg.norm(np.diff(x - centre, axis=0), axis=-1).mean(-1)
+    return (body > max(GLITCH * median, GLITCH_METRES)) & (pose < 0.5 * body)
+
+
 def retime_path(y: np.ndarray, a: int, b: int, path: np.ndarray) -> np.ndarray:
     """``y (T, J, 3)`` with frames ``a..b`` (inclusive) travelling along ``path (L, J, 3)`` (by arc length)
-    at a smooth speed that joins the speeds just outside; frames ``a`` and ``b`` keep their poses."""
+    at a smooth speed that joins the speeds just outside; frames ``a`` and ``b`` keep their poses. A path with a
+    jump in the recording (:func:`teleports`) is not re-timed: ``y`` as given."""
     path = np.asarray(path, np.float64)
+    if teleports(path, frame_speed(y)[1]).any():
+        return y.copy()
     length = float(np.linalg.norm(np.diff(path, axis=0), axis=-1).mean(-1).sum())
     out = y.copy()
     out[a : b + 1] = resample_path(path, arc_length_profile(path), speed_profile(y, a, b, length)).astype(y.dtype)
@@ -115,13 +139,14 @@ def stall_retime_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, stall:
 def stall_window(y: np.ndarray, lo: int, hi: int, *, stall: float = 0.1, rush: float = 1.5, reach: int = 12
                  ) -> tuple[int, int]:
     """``[lo, hi)`` grown over the stall before it (mean joint speed under ``stall`` of the clip's median)
-    and the rush after it (over ``rush`` times the median), by at most ``reach`` frames each side: a
-    stalled transition must be re-timed from where it stops to where it has caught up."""
+    and the rush after it (over ``rush`` times the median, not a jump: :func:`teleports`), by at most ``reach``
+    frames each side: a stalled transition must be re-timed from where it stops to where it has caught up."""
     speed, median = frame_speed(y)
     a, c = lo, hi
     while a > max(lo - reach, 1) and speed[a - 1] < stall * median:
         a -= 1
-    while c < min(hi + reach, len(y) - 1) and speed[c - 1] > rush * median:
+    jumps = teleports(y, median)
+    while c < min(hi + reach, len(y) - 1) and speed[c - 1] > rush * median and not jumps[c - 1]:
         c += 1
     return a, c
 
