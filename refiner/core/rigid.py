@@ -14,7 +14,7 @@ import numpy as np
 from refiner.core.skeletons import bone_lengths, get_skeleton, joint_bone_lengths, with_bone_lengths
 
 __all__ = ["rigid_skeleton", "rigid_core", "bone_variation", "BoneProportions", "robust_bone_lengths", "CORE_TOLERANCE", "CORE_SHARE",
-           "REBUILD_BONES", "BLEND_AUTOCORRELATION", "EXACT_TOLERANCE", "EXACT_FRAMES", "EXACT_SPREAD"]
+           "REBUILD_BONES", "BLEND_AUTOCORRELATION", "EXACT_TOLERANCE", "EXACT_FRAMES", "EXACT_SPREAD", "rough_bones"]
 
 #: Frames whose bones all lie within this share of one another's lengths form a rigid core (mocap bones
 #: are exact to 1e-5; a frame blended 10 % toward another pose shortens its forearm by about 1 %).
@@ -91,6 +91,24 @@ def bone_variation(joints: np.ndarray, skeleton: str) -> float | np.ndarray:
     x = np.asarray(joints)
     variation = _worst_variation(bone_lengths(x[None] if x.ndim == 3 else x, skeleton))
     return float(variation[0]) if x.ndim == 3 else variation
+
+
+def rough_bones(joints: np.ndarray, skeleton: str) -> np.ndarray:
+    """``(T,)``: how roughly each frame's bones of ``joints (T, J, 3)`` metres leave the clip's :func:`rigid_core`:
+    the mean over bones of the second difference in time of each bone's relative deviation from the core's median
+    length (0.02: 2 %). Noise on the joints stretches and shrinks bones at random, frame by frame; a pose blended
+    toward another, a re-timing's interpolation or a slow drift changes them smoothly (near 0). 0 on the core, at
+    the clip's ends and throughout a clip with no core (nothing to deviate from)."""
+    x = np.asarray(joints, np.float64)
+    out = np.zeros(len(x))
+    lengths = bone_lengths(x, skeleton)
+    core = rigid_core(lengths, poses=x) if len(x) >= 3 else None
+    if core is None:
+        return out
+    d = lengths / np.maximum(np.median(lengths[core], 0), 1e-9) - 1
+    out[1:-1] = np.abs(d[1:-1] - 0.5 * (d[:-2] + d[2:])).mean(-1)
+    out[core] = 0.0
+    return out
 
 
 def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, iterations: int = 60,

@@ -35,7 +35,7 @@ from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
 from refiner.refinement.retrace import cut_retraces
-from refiner.refinement.rigid_step import natural_bones_back, rigid_at_last, rigid_first
+from refiner.refinement.rigid_step import natural_bones_back, noisy_bones, rigid_at_last, rigid_first
 from refiner.refinement.noise_filter import filtered_noise
 from refiner.refinement.pose_prior import prior_posed
 from refiner.refinement.timing_estimation import estimated_retiming
@@ -370,7 +370,8 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                 else:
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
-    noise = None if clf_all is None else clf_all[..., 1 + _GROUP_NAMES.index("noise")]  # repaired: before any snap
+    noise = None if clf_all is None else np.maximum(clf_all[..., 1 + _GROUP_NAMES.index("noise")],  # before any snap
+                                                    noisy_bones(given, refiner.skeleton, cored))  # bones too
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
     out = filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)
     return natural_bones_back(refiner, rigid_at_last(refiner, out, reports, cored), given, rigid, reports)
