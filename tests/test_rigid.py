@@ -122,3 +122,26 @@ def test_noise_the_classifier_misses_is_denoised_where_the_bones_show_it(humanac
     err = lambda m: np.linalg.norm(m.joints - clean.joints, axis=-1).mean()  # noqa: E731
     monkeypatch.setattr(rigid_step, "NOISY_BONES", None)
     assert err(out) < 0.8 * err(model.refine(flawed, action=clean.action))
+
+
+@pytest.mark.real_data
+def test_a_spike_is_put_back_between_its_neighbours_not_carried_to_the_children(humanact12, rng, monkeypatch):
+    """A 5 cm spike on the left elbow (frame 12) and on the root (frames 25-26) of an exact clip: each joint, off the
+    core alone, is put back between the frames around it (``SPIKE_FRAMES``); rebuilt outward, the elbow's spike
+    moved the wrist and hand too. ``refine`` removes most of the spikes' error (it tripled it before)."""
+    from refiner.refinement.pipeline import Refiner
+
+    clip = next(m for m in humanact12.split("test").motions if m.n_frames >= 40).joints[:40].astype(np.float64)
+    spiked = clip.copy()
+    spiked[12, 18] += [0.05, -0.03, 0.02]
+    spiked[25:27, 0] += [-0.04, 0.03, 0.03]
+    err = lambda a: np.linalg.norm(a - clip, axis=-1).mean()  # noqa: E731
+    fixed = rigid_skeleton(spiked, "humanact12", 0.005, keep_core=True, spikes=True)[0]
+    assert err(fixed) < 0.5 * err(spiked)
+    rebuilt = rigid_skeleton(spiked, "humanact12", 0.005, keep_core=True)[0]  # the release before: rebuilt outward
+    assert err(rebuilt) > err(spiked)
+    monkeypatch.setattr(rigid, "SPIKE_FRAMES", 0)
+    np.testing.assert_array_equal(rigid_skeleton(spiked, "humanact12", 0.005, keep_core=True, spikes=True)[0], rebuilt)
+    monkeypatch.undo()
+    out = Refiner.pretrained("humanact12", split="train").refine(spiked.astype(np.float32))
+    assert err(out) < 0.5 * err(spiked)

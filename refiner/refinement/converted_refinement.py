@@ -126,7 +126,8 @@ class ConvertedRefiner:
         long_enough = clips.shape[1] >= MIN_FRAMES  # shorter clips come back exactly as given
         core = bool(getattr(self.base, "rigid_core", False))  # mocap edited in places: on its exact frames' lengths
         rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones,
-                                proportions=self.proportions, keep_core=core) if long_enough else (c, 0.0) for c in clips]
+                                proportions=self.proportions, keep_core=core, spikes=core) if long_enough else (c, 0.0)
+                 for c in clips]
         given = np.stack([r[0] for r in rigid]).astype(np.float32)
         # the joints the conversion estimates do not keep their lengths, and the flaw classifier reads
         # bone-length changes as flaws (it flagged every frame of converted clean clips): make them rigid

@@ -38,7 +38,7 @@ def rigid_first(refiner, clips: np.ndarray, reports: list) -> tuple[np.ndarray, 
     edited in places (a pose blended toward another), and the prior's refit of its every frame moved them."""
     prior = _proportions(refiner)
     rigid, variations = rigid_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, proportions=prior,
-                                       keep_core=refiner.rigid_core, keep_shortened=refiner.rigid_core)
+                                       keep_core=refiner.rigid_core, keep_shortened=refiner.rigid_core, spikes=True)
     drifting = drifting_skeleton(clips, refiner.skeleton, refiner.rigid_tolerance, variation=variations)  # the input's bones
     lengths = "the clip's median bone lengths" + ("" if prior is None else ", drawn toward human proportions where they drift")
     out, cored = clips.copy(), np.zeros(len(clips), bool)
