@@ -103,21 +103,25 @@ def bone_variation(joints: np.ndarray, skeleton: str) -> float | np.ndarray:
     return float(variation[0]) if x.ndim == 3 else variation
 
 
-def rough_bones(joints: np.ndarray, skeleton: str) -> np.ndarray:
+def rough_bones(joints: np.ndarray, skeleton: str, *, natural: bool = False) -> np.ndarray:
     """``(T,)``: how roughly each frame's bones of ``joints (T, J, 3)`` metres leave the clip's :func:`rigid_core`:
     the mean over bones of the second difference in time of each bone's relative deviation from the core's median
     length (0.02: 2 %). Noise on the joints stretches and shrinks bones at random, frame by frame; a pose blended
     toward another, a re-timing's interpolation or a slow drift changes them smoothly (near 0). 0 on the core, at
-    the clip's ends and throughout a clip with no core (nothing to deviate from)."""
+    the clip's ends and throughout a clip with no core (nothing to deviate from), unless ``natural``: then a clip
+    with no core deviates from its own median lengths (data whose bones vary, as CMU's processed joints: their
+    clean frames' roughness stays under 0.5 %)."""
     x = np.asarray(joints, np.float64)
     out = np.zeros(len(x))
     lengths = bone_lengths(x, skeleton)
     core = rigid_core(lengths, poses=x) if len(x) >= 3 else None
-    if core is None:
+    if core is None and not (natural and len(x) >= 3):
         return out
-    d = lengths / np.maximum(np.median(lengths[core], 0), 1e-9) - 1
+    reference = np.median(lengths if core is None else lengths[core], 0)
+    d = lengths / np.maximum(reference, 1e-9) - 1
     out[1:-1] = np.abs(d[1:-1] - 0.5 * (d[:-2] + d[2:])).mean(-1)
-    out[core] = 0.0
+    if core is not None:
+        out[core] = 0.0
     return out
 
 

@@ -371,7 +371,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
     noise = None if clf_all is None else np.maximum(clf_all[..., 1 + _GROUP_NAMES.index("noise")],  # before any snap
-                                                    noisy_bones(given, refiner.skeleton, cored))  # bones too
+                                                    noisy_bones(refiner, given, cored))  # bones too
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
     out = filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)
     return natural_bones_back(refiner, rigid_at_last(refiner, out, reports, cored), given, rigid, reports)

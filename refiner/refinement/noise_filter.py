@@ -314,7 +314,7 @@ def denoised_noise_runs(refiner, clips: np.ndarray, reports: list, noise_probabi
     return _put_back(refiner, clips, denoised, todo, reports, lambda b, n: (
         f"a noise run ({n} frames changed): the noise-group probability passed {NOISE_PROBABILITY:g} for "
         f"{NOISE_RUN} frames or more (grown while above {NOISE_LOW:g}; the flaw probability under its threshold), "
-        f"or the bones left the clip's rigid core roughly; denoised at each frame's estimated level"), per_run=True)
+        f"or its bones changed length roughly from frame to frame; denoised at each frame's estimated level"), per_run=True)
 
 
 def _put_back(refiner, clips: np.ndarray, denoised: np.ndarray, rows, reports: list, reason, per_run: bool = False

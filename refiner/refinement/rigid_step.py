@@ -116,13 +116,16 @@ def natural_bones_back(refiner, clips: np.ndarray, given: np.ndarray, rigid: np.
     return out
 
 
-def noisy_bones(clips: np.ndarray, skeleton: str, cored: np.ndarray) -> np.ndarray:
+def noisy_bones(refiner, clips: np.ndarray, cored: np.ndarray) -> np.ndarray:
     """``(B, T)`` bool: the frames of ``clips (B, T, J, 3)`` (as given) whose bones leave their clip's rigid core
     roughly (:data:`NOISY_BONES`): noise on a mocap clip edited in places. Only the ``cored (B,)`` clips
-    (:func:`rigid_first`'s) are looked at; all False with ``NOISY_BONES = None``."""
+    (:func:`rigid_first`'s) are looked at, unless the weights' data have bones that vary (``refiner.natural_bones``
+    over ``refiner.rigid_tolerance``: CMU): then every clip, a clip with no core against its own median lengths.
+    All False with ``NOISY_BONES = None``."""
     out = np.zeros(clips.shape[:2], bool)
-    for b in np.flatnonzero(cored) if NOISY_BONES is not None else ():
-        out[b] = rough_bones(clips[b], skeleton) > NOISY_BONES
+    natural = bool(getattr(refiner, "natural_bones", 0.0) > refiner.rigid_tolerance)
+    for b in (np.arange(len(clips)) if natural else np.flatnonzero(cored)) if NOISY_BONES is not None else ():
+        out[b] = rough_bones(clips[b], refiner.skeleton, natural=natural) > NOISY_BONES
     return out
 
 
