@@ -12,7 +12,8 @@ true action; prints the share of the added MPJPE removed per recipe:
 
 - ``arm_noise``: white noise (1 cm) on the 8 arm joints over a 10-30-frame window;
 - ``window_noise_2cm``: white noise (2 cm) on every joint over such a window;
-- ``bursts``: 3 frames, each with 3 random joints moved by 5 cm (a spike);
+- ``bursts``: 3 random frames, each with 3 random joints moved by normal noise of 5 cm per axis (a spike; a joint
+  drawn twice in a frame moves once);
 - ``low_freq``: noise (3 cm) smoothed over 3 frames and tripled, over such a window;
 - ``whole_clip_noise_0.5cm``: white noise (0.5 cm) on every frame.
 

@@ -218,8 +218,12 @@ def test_windows_do_not_grow_over_a_jump_in_the_recording(monkeypatch):
     y = np.zeros((40, 3, 3))
     y[1:, :, 0] = np.cumsum(step)[:, None]
     assert np.flatnonzero(teleports(y)).tolist() == [26]
-    assert stall_window(y, 15, 20) == (15, 27)
+    assert stall_window(y, 15, 20) == (15, 26)  # re-times y[14..26]: the rush, not the jump after it
     np.testing.assert_array_equal(retime_path(y, 10, 30, y[10:31]), y)
     assert not np.array_equal(retime_path(y, 10, 25, y[10:26]), y)
+    still = np.zeros((40, 3, 3))  # frames 1-9 still after a jump from frame 0, then steady motion
+    still[0, :, 0] = -0.5
+    still[10:, :, 0] = 0.01 * np.arange(1, 31)[:, None]
+    assert stall_window(still, 4, 8)[0] == 2  # grown over the stall, not over the jump (a = 1 re-times from frame 0)
     monkeypatch.setattr(repair_candidates, "GLITCH", np.inf)  # the release before: grown over the jump
-    assert stall_window(y, 15, 20) == (15, 28)
+    assert stall_window(y, 15, 20) == (15, 28) and stall_window(still, 4, 8)[0] == 1

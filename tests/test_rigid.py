@@ -146,3 +146,33 @@ def test_a_spike_is_put_back_between_its_neighbours_not_carried_to_the_children(
     monkeypatch.undo()
     out = Refiner.pretrained("humanact12", split="train").refine(spiked.astype(np.float32))
     assert err(out) < 0.5 * err(spiked)
+
+
+@pytest.mark.parametrize("skeleton, joint", [("uestc", 3), ("cmu_mocap", 2)])
+def test_a_spike_in_a_masked_layout_moves_no_other_joint(skeleton, joint):
+    """With a layout's flexible bones left free (``bones=``), a joint left with a single bone, to a child, is not
+    read as spiked when that child spikes: only the spiked joint moves (the neighbour moved 3-4 mm before)."""
+    from scipy.spatial.transform import Rotation
+
+    from refiner.core.skeletons import get_skeleton
+    from refiner.refinement.converted_refinement import FLEXIBLE_BONES
+
+    skel = get_skeleton(skeleton)
+    rng = np.random.default_rng(0)
+    rest = np.zeros((skel.n_joints, 3))
+    for j, p in enumerate(skel.parents):
+        if p >= 0:
+            rest[j] = rest[p] + 0.15 * rng.normal(size=3) / np.sqrt(3)
+    clip = np.zeros((40, skel.n_joints, 3))  # rigid bones, every joint turning a little over time
+    for t in range(40):
+        for j, p in enumerate(skel.parents):
+            turn = Rotation.from_rotvec(0.3 * np.sin(0.1 * t + j) * np.array([1, 0.5, 0.2]))
+            clip[t, j] = [0.01 * t, 0, 0] if p < 0 else clip[t, p] + turn.apply(rest[j] - rest[p])
+    spiked = clip.copy()
+    spiked[12, joint] += [0.05, -0.03, 0.02]
+    free = {frozenset(pair) for pair in FLEXIBLE_BONES.get(skeleton, ())}
+    mask = np.array([frozenset((skel.joint_names[a], skel.joint_names[b])) not in free for a, b in skel.bones])
+    assert not mask.all()
+    out = rigid_skeleton(spiked, skeleton, 0.005, bones=mask, keep_core=True, spikes=True)[0]
+    moved = np.linalg.norm(out[12] - clip[12], axis=-1)
+    assert moved[joint] < 0.01 * np.linalg.norm([0.05, -0.03, 0.02]) and np.delete(moved, joint).max() < 1e-3

@@ -105,8 +105,8 @@ def bone_variation(joints: np.ndarray, skeleton: str) -> float | np.ndarray:
 
 def rough_bones(joints: np.ndarray, skeleton: str, *, natural: bool = False) -> np.ndarray:
     """``(T,)``: how roughly each frame's bones of ``joints (T, J, 3)`` metres leave the clip's :func:`rigid_core`:
-    the mean over bones of the second difference in time of each bone's relative deviation from the core's median
-    length (0.02: 2 %). Noise on the joints stretches and shrinks bones at random, frame by frame; a pose blended
+    the mean over bones of how far each bone's relative deviation from the core's median length lies from the mean
+    of its deviations in the frames before and after (half the second difference in time; 0.02: 2 %). Noise on the joints stretches and shrinks bones at random, frame by frame; a pose blended
     toward another, a re-timing's interpolation or a slow drift changes them smoothly (near 0). 0 on the core, at
     the clip's ends and throughout a clip with no core (nothing to deviate from), unless ``natural``: then a clip
     with no core deviates from its own median lengths (data whose bones vary, as CMU's processed joints: their
@@ -210,6 +210,8 @@ def _unspiked(x: np.ndarray, off: np.ndarray, pairs: np.ndarray, deviation: np.n
     for j in sorted(set(pairs.ravel().tolist())):  # parents before children in every registered skeleton
         at = (pairs[:, 0] == j) | (pairs[:, 1] == j)
         n_at = int(at.sum())  # a spike across one of three or more bones barely changes its length: one may stay
+        if j not in parent and n_at < 2:  # a masked layout's joint with one bone, to a child: the child's spike
+            continue
         alone = (off[:, at].sum(-1) >= (n_at if n_at <= 2 else n_at - 1)) & (deviation[:, at].max(-1) > SPIKE_DEVIATION)
         clear = ~off[:, at].any(-1)
         edges = np.flatnonzero(np.diff(np.r_[0, alone.astype(np.int8), 0]))

@@ -143,10 +143,10 @@ def stall_window(y: np.ndarray, lo: int, hi: int, *, stall: float = 0.1, rush: f
     frames each side: a stalled transition must be re-timed from where it stops to where it has caught up."""
     speed, median = frame_speed(y)
     a, c = lo, hi
-    while a > max(lo - reach, 1) and speed[a - 1] < stall * median:
+    jumps = teleports(y, median)  # the step a grown window would take in: a - 2 -> a - 1 before it, c -> c + 1 after
+    while a > max(lo - reach, 1) and speed[a - 1] < stall * median and not jumps[a - 2]:
         a -= 1
-    jumps = teleports(y, median)
-    while c < min(hi + reach, len(y) - 1) and speed[c - 1] > rush * median and not jumps[c - 1]:
+    while c < min(hi + reach, len(y) - 1) and speed[c - 1] > rush * median and not jumps[c]:
         c += 1
     return a, c
 

@@ -203,7 +203,10 @@ def cut_retraces(refiner, clips: np.ndarray, reports: list, mode: str, flaw_prob
             lo, hi = retrace_window(clips[b], loop)
             if peak < MIN_FLAW_PROBABILITY or changed[lo : hi + 1].any():
                 continue
-            out[b] = cut_retrace(out[b], loop, (lo, hi))[0]
+            cut = cut_retrace(out[b], loop, (lo, hi))[0]
+            if np.array_equal(cut, out[b]):  # the path held a jump in the recording: not re-timed
+                continue
+            out[b] = cut
             changed[lo : hi + 1] = True
             moved = 100 * float(np.linalg.norm(out[b][lo : hi + 1] - clips[b][lo : hi + 1], axis=-1).mean())
             reports[b].flagged_transitions.append([lo, hi + 1])

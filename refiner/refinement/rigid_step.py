@@ -95,7 +95,7 @@ def natural_bones_back(refiner, clips: np.ndarray, given: np.ndarray, rigid: np.
         stays = differs & ~(clips[b] == rigid[b]).all((1, 2))
         if not natural[b]:  # the frames a flaw took out of the band stay rigid too
             lengths = bone_lengths(given[b], refiner.skeleton)
-            stays |= differs & (np.abs(lengths / np.median(lengths, 0) - 1) > band).any(-1)
+            stays |= differs & (np.abs(lengths / np.maximum(np.median(lengths, 0), 1e-9) - 1) > band).any(-1)
         same = differs & ~binary_dilation(stays, iterations=max(int(refiner.blend), 1))
         if not same.any():  # every frame the rigid step moved stays rigid or was changed again by a flaw step
             continue
