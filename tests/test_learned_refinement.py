@@ -24,8 +24,7 @@ def tiny_learned(humanact12, tmp_path_factory):
     pick = [i for a in range(12) for i in np.flatnonzero(humanact12.actions == a)[::15][:6]]  # many subjects
     out = tmp_path_factory.mktemp("tiny_learned")
     for optional in ("flaw_denoiser", "motion_infiller", "timing_estimator"):  # optional parts, installed with the others
-        assert train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN,
-                                     only=optional) is None
+        assert train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", only=optional) is None
     refiner = train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN)
     return refiner, out
 
@@ -81,6 +80,26 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer",
                           "pose_prior", "texture_filter", "flaw_denoiser", "motion_infiller", "timing_estimator"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
+
+
+@pytest.mark.real_data
+def test_an_optional_part_is_added_to_a_finished_refiner_leaving_its_files_alone(humanact12, tmp_path):
+    from safetensors import safe_open
+
+    from refiner.refinement.train_learned import install_part, train_learned_refiner
+
+    added = train_learned_refiner(humanact12.subset(range(0, 1190, 40)), tmp_path, config="tiny", device="cpu",
+                                  base=SHIPPED_TRAIN, only="timing_estimator")
+    assert added.retiming == "estimated" and np.isfinite(added.timing_estimator.threshold_)  # calibrated there
+    assert added.manifest["learned"]["timing_threshold_frames"] == pytest.approx(added.timing_estimator.threshold_)
+    assert added.manifest["learned"]["timing_estimator"]["split"] == "all"  # the part's training log
+    for path in SHIPPED_TRAIN.glob("*.safetensors"):
+        if path.stem != "timing_estimator":  # the shipped one, replaced
+            assert (tmp_path / path.name).read_bytes() == path.read_bytes(), path.name
+    with safe_open(str(tmp_path / "timing_estimator.safetensors"), "np") as f:
+        assert any(k.endswith(".int8") for k in f.keys())  # stored as the shipped sets store it
+    with pytest.raises(ValueError, match="install_part adds one of"):
+        install_part(tmp_path, "flaw_repairer", added.flaw_repairer)
 
 
 @pytest.mark.real_data

@@ -35,8 +35,11 @@ def edit(folder: Path, change, *, rehash: bool = False):
 def test_shipped_refiner_manifests_carry_their_content_hash(folder):
     manifest, paths = read_refiner_manifest(_WEIGHTS / folder, _PARTS)
     assert manifest[CONTENT_KEY] == content_sha256(manifest)
-    options = {"flaw_denoiser", "motion_infiller", "timing_estimator"}  # trainable options, not shipped
+    options = {"flaw_denoiser", "motion_infiller"}  # trainable options, not shipped
     assert set(paths) == set(_PARTS) - options and len(manifest["action_names"]) == 12
+    refiner = Refiner.load(_WEIGHTS / folder)
+    assert refiner.retiming == "estimated"  # the timing estimator is shipped and used
+    assert refiner.timing_estimator.threshold_ == pytest.approx(manifest["learned"]["timing_threshold_frames"])
 
 
 def test_shipped_generator_manifest_carries_its_content_hash():

@@ -86,3 +86,16 @@ def test_run_ends_stay_and_short_clips_find_their_runs():
         assert retime_by_offsets(x[:n], d, 1.0, widen=3)[1] == [expected]
     with pytest.raises(ValueError, match="one value per frame"):
         retime_by_offsets(x, np.zeros(29), 1.0)
+
+
+def test_the_smoothed_view_keeps_shape_and_slow_motion_and_drops_noise(rng):
+    from refiner.refinement.timing_estimation import smoothed_in_time
+
+    t = np.linspace(0, 1, 60, dtype=np.float32)
+    slow = 0.3 * np.stack([np.sin(np.pi * t)] * 3, -1)[:, None].repeat(4, 1)  # (60, 4, 3) metres
+    noisy = (slow + rng.normal(0, 0.01, slow.shape)).astype(np.float32)
+    assert smoothed_in_time(noisy, 0.0) is noisy  # sigma 0: the clip as given
+    out = smoothed_in_time(noisy[None], 1.5)[0]  # batches smooth along their time axis
+    assert out.shape == noisy.shape and out.dtype == np.float32
+    assert np.abs(out - slow).mean() < 0.6 * np.abs(noisy - slow).mean()
+    assert np.abs(out - slow).max() < 0.7 * np.abs(noisy - slow).max()

@@ -29,7 +29,9 @@ def train_arguments(p: argparse.ArgumentParser) -> None:
                         "to the refiner in --base; --only flaw_classifier / flaw_recognizer / flaw_repairer / noise_filter / amplitude_restorer / pose_prior / texture_filter / flaw_denoiser / motion_infiller / timing_estimator "
                         "trains one of them")
     p.add_argument("--base", type=Path, default=None,
-                   help="with --learned: refiner folder whose concept and paper parts are kept (default: shipped weights of --split)")
+                   help="with --learned: refiner folder whose concept and paper parts are kept (default: shipped weights of --split); "
+                        "with --only and an optional part (flaw_denoiser, motion_infiller, timing_estimator): the refiner "
+                        "it is calibrated for and added to, written to --out")
 
 
 def train_run(args: argparse.Namespace) -> int:
@@ -45,6 +47,8 @@ def train_run(args: argparse.Namespace) -> int:
                                         base=args.base, progress=True)
         if refiner is None:
             print(f"trained part {args.only!r} into {args.out / 'parts'}")
+        elif args.only is not None:
+            print(f"part {args.only!r} calibrated and added to the refiner of {args.base}; written to {args.out}")
         else:
             print(f"learned steps added; flaw threshold {refiner.flaw_recognizer.threshold_:.3f}; written to {args.out}")
         return 0

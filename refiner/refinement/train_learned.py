@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import logging
+import shutil
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -15,6 +16,7 @@ import numpy as np
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.segmentation import segment
+from refiner.core.manifest import file_sha256, read_refiner_manifest, write_manifest
 from refiner.core.rigid import bone_variation
 from refiner.core.skeletons import BoneProportions, convert
 from refiner.io.datasets import MotionDataset
@@ -24,20 +26,27 @@ from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.amplitude import AmplitudeRestorer
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
-from refiner.refinement.pipeline import _WEIGHTS, Refiner
+from refiner.refinement.pipeline import _PARTS, _WEIGHTS, Refiner
 from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.rigid_step import NATURAL_BONES_KEY
 from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.timing_estimation import TimingEstimator
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
-           "calibrate_learned", "calibration_split", "CLIP_RATE", "POSE_QUANTILE", "POSE_TEXTURE_QUANTILE", "bone_proportion_records", "CONVERTED_SKELETONS",
+           "calibrate_learned", "calibration_split", "install_part", "add_optional_part", "STORED_INT8", "CLIP_RATE", "POSE_QUANTILE", "POSE_TEXTURE_QUANTILE", "bone_proportion_records", "CONVERTED_SKELETONS",
            "fit_anchor_concepts"]
 
 #: Share of held-out real clips the timing estimator may re-time: it changes frames unverified, before
 #: detection. Calibration subjects 9-10 (mean of the 7 families removed): thresholds 1.8 / 2.5 / 3.5 /
 #: 3.8 frames (1.8: 3 % of clean clips; 3.8: 1 %) gave 19.0 / 19.5 / 19.5 / 19.8 %, 18.6 without it.
 TIMING_CLIP_RATE = 0.01
+#: Parts whose weight matrices the shipped sets store as int8 codes (``NetworkComponent.save(int8=True)``): the
+#: paper's (see their manifests' notes) and the timing estimator (0.70 MB instead of 1.36; its offsets move by
+#: 0.04 frames at most on held-out clips, against a threshold of about 3.7).
+STORED_INT8 = ("recognizer", "anchor_refiner", "transition_generator", "timing_estimator")
+#: The manifest key (under ``learned``) of each optional part's threshold.
+_THRESHOLD_KEYS = {"flaw_denoiser": "denoiser_threshold_m", "motion_infiller": None,
+                   "timing_estimator": "timing_threshold_frames"}
 #: Layouts refined through HumanAct12 weights (``Refiner.pretrained`` gives them a ConvertedRefiner).
 CONVERTED_SKELETONS = ("uestc", "humanml3d")
 #: Share of held-out real clips each detector may flag (both together: at most twice this).
@@ -210,8 +219,27 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
                                    **({"amplitude_gate": parts["amplitude_restorer"].gate_,
                                        "amplitude_target": parts["amplitude_restorer"].target_}
                                       if parts.get("amplitude_restorer") is not None else {})}
-    refiner.save(out or folder, half=True)
+    refiner.save(out or folder, half=True, int8=STORED_INT8)
     return Refiner.load(out or folder)
+
+
+def install_part(folder: str | Path, name: str, part, *, info: dict | None = None) -> None:
+    """Add one fitted and calibrated optional part (:data:`OPTIONAL_PARTS`) to the refiner saved in ``folder``, in
+    place: its file (float16, int8 codes if in :data:`STORED_INT8`), its sha256 under ``files``, its threshold and
+    ``info`` under ``learned``. Every other file stays byte for byte, so its figures stay those measured."""
+    if name not in OPTIONAL_PARTS:
+        raise ValueError(f"install_part adds one of {', '.join(OPTIONAL_PARTS)}; got {name!r}.")
+    folder = Path(folder)
+    manifest, _ = read_refiner_manifest(folder, _PARTS)  # a folder that fails its hashes is refused here
+    path = folder / f"{name}.safetensors"
+    part.save(path, half=True, int8=name in STORED_INT8)
+    learned = dict(manifest.get("learned", {}))
+    if _THRESHOLD_KEYS[name] is not None:
+        learned[_THRESHOLD_KEYS[name]] = float(part.threshold_)
+    learned[name] = info or {}
+    write_manifest(folder / "manifest.json", {**manifest, "learned": learned,
+                                              "files": {**manifest["files"], name: {"file": path.name,
+                                                                                    "sha256": file_sha256(path)}}})
 
 
 def fit_anchor_concepts(clips, actions, anchors, *, n_actions: int, config: str = "default",
@@ -228,6 +256,8 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
     """Train the learned steps (:func:`train_learned`) and save them with the parts of the refiner in
     ``base`` (default: the shipped weights of ``split``) to ``out``; None when ``only`` trains one part."""
     parts = train_learned(dataset, out, split=split, only=only, **kwargs)
+    if only in OPTIONAL_PARTS and base is not None:  # one option added to a finished refiner
+        return add_optional_part(parts[only], only, dataset, out, split=split, base=base)
     if only is not None:
         return None
     natural = calibrate_learned(parts, dataset, split=split)[NATURAL_BONES_KEY]  # the parts keep their thresholds
@@ -240,6 +270,28 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
             info[name] = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"}
     return install_learned(base, parts, out=out, info={"split": split, **bone_proportion_records(dataset.split(split)),
                                                         NATURAL_BONES_KEY: natural, **info})
+
+
+def add_optional_part(part, name: str, dataset: MotionDataset, out: str | Path, *, split: str = "all",
+                      base: str | Path) -> Refiner:
+    """The refiner in ``base`` copied to ``out`` with ``part`` (one of :data:`OPTIONAL_PARTS`, trained on ``split``)
+    calibrated on the split's held-out subjects (:func:`calibration_split`) and installed (:func:`install_part`)."""
+    data = dataset.split(split)
+    clips = [data.motions[i].joints for i in np.flatnonzero(calibration_split(data.subjects))]
+    if name == "timing_estimator":
+        part.calibrate(clips, clip_rate=TIMING_CLIP_RATE)
+    elif name == "flaw_denoiser":
+        part.calibrate(clips, clip_rate=CLIP_RATE)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest, paths = read_refiner_manifest(base, _PARTS)
+    for path in [*paths.values(), Path(base) / "manifest.json"]:
+        if Path(path).resolve() != (out / Path(path).name).resolve():
+            shutil.copyfile(path, out / Path(path).name)
+    log_path = out / "parts" / f"{name}.json"
+    info = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"} if log_path.is_file() else {}
+    install_part(out, name, part, info=info)
+    return Refiner.load(out)
 
 
 def bone_proportion_records(data: MotionDataset) -> dict:
