@@ -33,7 +33,10 @@ Variants that lost (bench subjects 11-12, mean of the 7 families): 64 channels, 
 clean-clip threshold 6.7 frames: time_warp 1.2 %; at 3 % of clean clips, 2.4 frames: time_warp 17.3 but jitter
 29.3, foot_sliding 43.9); 128 channels, 40 epochs (1.36 MB per set as float16, past the weights budget): 34.7 %;
 the network seeing the clip Gaussian-smoothed (``smooth=1.5`` frames, so that noise would not read as timing):
-validation loss 0.79-0.84 against 0.50-0.53, threshold 12 frames, 31.5 %.
+validation loss 0.79-0.84 against 0.50-0.53, threshold 12 frames, 31.5 %. Not taken either: the estimate averaged
+with the clip's played backwards (its offsets reversed and negated; threshold 2.8 frames): calibration subjects
+34.1 -> 34.5 % (jitter 30.5 -> 34.1, frozen 70.0 -> 69.3), bench 36.3 -> 36.2 % (time_warp 18.6 -> 22.3, frozen
+71.6 -> 66.1): no gain worth twice the passes.
 """
 from __future__ import annotations
 
@@ -267,14 +270,17 @@ class TimingEstimator(NetworkComponent):
 
     @torch.no_grad()
     def offsets(self, joints) -> np.ndarray:
-        """Estimated source-time offsets ``(B, T)`` float32, frames, of a batch ``(B, T, J, 3)`` metres, one pass."""
+        """Estimated source-time offsets ``(B, T)`` float32, frames (to 1e-4), of a batch ``(B, T, J, 3)`` metres, one pass."""
         check_is_fitted(self, "network_", msg=NOT_FITTED)
         x = np.array(joints, np.float32, copy=True)  # torch shares the memory; the caller's stays untouched
         if x.ndim != 4 or x.shape[2:] != (self.n_joints_, 3):
             raise ValueError(f"`joints` must be (B, T, {self.n_joints_}, 3); got shape {x.shape}.")
         if not np.isfinite(x).all():
             raise ValueError("`joints` must be finite; got NaN or Inf.")
-        return self.network_(torch.from_numpy(smoothed_in_time(x, self.smooth)).to(self.device_)).cpu().numpy()
+        d = self.network_(torch.from_numpy(smoothed_in_time(x, self.smooth)).to(self.device_)).cpu().numpy()
+        # to 1e-4 frames: a batched convolution differs from a single clip's in the last bits, and the re-timed
+        # frames follow the offsets continuously; a clip must come out the same alone or in a batch
+        return np.round(d, 4)
 
     def retime(self, joints) -> tuple[np.ndarray, list[list[tuple[int, int]]]]:
         """Joints ``(B, T, J, 3)`` with the runs whose offsets pass ``threshold_`` re-timed, and those runs per clip."""
