@@ -40,7 +40,7 @@ def test_known_offsets_are_undone_and_nothing_else_moves(humanact12, rng):
 @pytest.mark.real_data
 def test_estimator_learns_where_frames_belong(humanact12, one_torch_thread, tmp_path):
     train = [m.joints for m in humanact12.motions[:900:3]]
-    est = TimingEstimator(hidden=32, negatives=0.0, schedule=TrainSchedule(
+    est = TimingEstimator(hidden=32, negatives=0.0, turn=False, schedule=TrainSchedule(  # turned crops learn slower
         n_epochs=10, steps_per_epoch=40, batch_size=24, learning_rate=3e-3, patience=100), random_state=0).fit(train)
     assert est.history_[-1]["val"] < 0.85 * est.history_[0]["val"]  # 400 steps: it has begun to learn
     rng = np.random.default_rng(5)
@@ -99,3 +99,38 @@ def test_the_smoothed_view_keeps_shape_and_slow_motion_and_drops_noise(rng):
     assert out.shape == noisy.shape and out.dtype == np.float32
     assert np.abs(out - slow).mean() < 0.6 * np.abs(noisy - slow).mean()
     assert np.abs(out - slow).max() < 0.7 * np.abs(noisy - slow).max()
+
+
+@pytest.mark.real_data
+def test_turned_training_crops_keep_bones_and_heights(humanact12):
+    """Crops turned about the vertical (``turn``): the same poses, bones and heights, facing elsewhere."""
+    from refiner.core.skeletons import bone_lengths
+    from refiner.refinement.timing_estimation import _RetimedCrops
+
+    clips = [m.joints for m in humanact12.motions[:40] if m.n_frames >= 64][:8]
+    plain = _RetimedCrops(clips, 64, 0.0, 0.0, "humanact12")  # not re-timed: the same crops, one of them turned
+    turned = _RetimedCrops(clips, 64, 0.0, 0.0, "humanact12", turn=True)
+    (x, dx), (y, dy) = [zip(*(c._crop(clip, np.random.default_rng(i)) for i, clip in enumerate(clips)))
+                        for c in (plain, turned)]  # one seed per clip: the same crop start in both
+    x, y = np.stack(x), np.stack(y)
+    assert not np.any(dx) and not np.any(dy)
+    np.testing.assert_allclose(bone_lengths(y, "humanact12"), bone_lengths(x, "humanact12"), atol=1e-5)
+    np.testing.assert_allclose(y[..., 1], x[..., 1], atol=1e-5)  # y is the vertical: heights stay
+    assert np.abs(y[..., [0, 2]] - x[..., [0, 2]]).mean() > 0.01  # they face elsewhere
+
+
+@pytest.mark.real_data
+def test_a_clip_is_retimed_the_same_alone_or_in_a_batch(humanact12):
+    """Batched and single convolutions differ in the last bits; a clip near or past the threshold is estimated alone."""
+    from refiner.evaluation.flaws import time_warp
+    from refiner.refinement.pipeline import Refiner
+
+    est = Refiner.pretrained("humanact12", split="train").timing_estimator
+    clips = [m for m in humanact12.split("test").motions if m.n_frames >= 60][:48]
+    batch = np.stack([time_warp(m, 3, random_state=i).motion.joints[:60] for i, m in enumerate(clips)]).astype(np.float32)
+    out, runs = est.retime(batch)
+    assert sum(map(len, runs)) >= 5  # the shipped estimator re-times warped clips
+    for b in range(len(batch)):
+        alone, alone_runs = est.retime(batch[b : b + 1])
+        assert alone_runs[0] == runs[b]
+        np.testing.assert_array_equal(alone[0], out[b])

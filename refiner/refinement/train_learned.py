@@ -278,12 +278,15 @@ def add_optional_part(part, name: str, dataset: MotionDataset, out: str | Path, 
     calibrated on the split's held-out subjects (:func:`calibration_split`) and installed (:func:`install_part`)."""
     data = dataset.split(split)
     clips = [data.motions[i].joints for i in np.flatnonzero(calibration_split(data.subjects))]
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    if name in STORED_INT8:  # calibrated as it will be stored: int8 codes move its outputs a little
+        part.save(out / f"{name}.safetensors", int8=True)
+        part = type(part).load(out / f"{name}.safetensors")
     if name == "timing_estimator":
         part.calibrate(clips, clip_rate=TIMING_CLIP_RATE)
     elif name == "flaw_denoiser":
         part.calibrate(clips, clip_rate=CLIP_RATE)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     manifest, paths = read_refiner_manifest(base, _PARTS)
     for path in [*paths.values(), Path(base) / "manifest.json"]:
         if Path(path).resolve() != (out / Path(path).name).resolve():
