@@ -86,6 +86,14 @@ def test_run_ends_stay_and_short_clips_find_their_runs():
         assert retime_by_offsets(x[:n], d, 1.0, widen=3)[1] == [expected]
     with pytest.raises(ValueError, match="one value per frame"):
         retime_by_offsets(x, np.zeros(29), 1.0)
+    d = np.zeros(30)
+    d[10:16] = [1, 2, 3, 4, 4, 3]
+    jumps = np.zeros(29, bool)
+    jumps[25] = True  # a jump outside the run: re-timed as before
+    assert retime_by_offsets(x, d, 3.0, widen=3, jumps=jumps)[1] == [(9, 20)]
+    jumps[14] = True  # inside it: re-sampling would spread the jump, so the run is left as given
+    out, runs = retime_by_offsets(x, d, 3.0, widen=3, jumps=jumps)
+    assert runs == [] and np.array_equal(out, x)
 
 
 def test_the_smoothed_view_keeps_shape_and_slow_motion_and_drops_noise(rng):
