@@ -38,7 +38,8 @@ __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned"
 
 #: Share of held-out real clips the timing estimator may re-time: it changes frames unverified, before
 #: detection. Calibration subjects 9-10 (mean of the 7 families removed): thresholds 1.8 / 2.5 / 3.5 /
-#: 3.8 frames (1.8: 3 % of clean clips; 3.8: 1 %) gave 19.0 / 19.5 / 19.5 / 19.8 %, 18.6 without it.
+#: 3.8 frames (1.8: 3 % of clean clips; 3.8: 1 %) gave 19.0 / 19.5 / 19.5 / 19.8 %, 18.6 without it (the first
+#: version, in an older pipeline); the shipped 80-channel one (unturned) at 0.5 / 1 %: 33.9 / 34.1 %, 30.7 without it.
 TIMING_CLIP_RATE = 0.01
 #: Parts whose weight matrices the shipped sets store as int8 codes (``NetworkComponent.save(int8=True)``): the
 #: paper's (see their manifests' notes) and the timing estimator (0.70 MB instead of 1.36; its offsets move by
@@ -89,7 +90,7 @@ NOISE_FILTER_CONFIGS = {"default": {}, "tiny": dict(half_width=1, copies=1, rigi
 #: refiner (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
 #: they are calibrated and installed with the others.
 OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller", "timing_estimator")
-#: The timing estimator's settings (about 30 minutes on one CPU core) and its tiny test version.
+#: The timing estimator's settings (about 20 minutes on one CPU core) and its tiny test version.
 TIMING_CONFIGS = {"default": dict(schedule=dict()),
                   "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
