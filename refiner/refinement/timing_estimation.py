@@ -30,9 +30,24 @@ subjects 9-10 (1 % re-timed: 1.65 frames), severity 2, mean of the 7 families re
   kinks of linear interpolation, which generators do not make): time_warp -0.4 -> 23.6 %, frozen 57.4 ->
   72.1, reversed 32.5 -> 33.8: it reads the timing, not the resampling.
 
+A run is re-timed only where the flaw classifier's timing group agrees (:data:`TIMING_AGREEMENT`: its probability
+reaches 0.8 somewhere in the run, read on the clip as given). Of the runs the estimator alone re-timed on the
+calibration subjects, the glides', drifts' and clean clips' made them worse (20 of 21, 5 of 5, 2 of 2), and the
+classifier read most of them as no timing flaw. Chosen on the calibration subjects (mean 34.98 % without it; 35.48 /
+35.69 / 35.96 / 35.83 / 35.81 % at 0.3 / 0.5 / 0.8 / 0.9 / 0.95); bench subjects 11-12: 37.23 -> 37.75 % (jitter 35.6
+-> 37.6, foot_sliding 52.6 -> 53.8, frozen 71.6 -> 72.0, reversed 35.4 either way, time_warp 24.1 -> 24.2), clean
+clips 0.008 -> 0.003 cm, 3.3 -> 1.8 % touched.
+
 The crops turned at random (``turn``) took the validation loss from 0.51 to 0.41 (the all-subject set's, on
 subjects 11-12, 0.80 to 0.69) and the clean-clip threshold from 3.1 to 1.65 frames; unturned, the same network
 gave 34.1 % on the calibration subjects and 36.3 % on the bench (time_warp 19.5 and 18.6 %).
+
+Why time warps gain least: re-timed by their *true* offsets at the same threshold, the calibration subjects' warped
+clips lose 86 % of the added error (frozen transitions 92 %); by the estimate, 26 % (70 %). On the bench's warps,
+which span half a clip's transitions (median 37 frames, a tenth over 100), the estimate correlates 0.44 with the true
+offsets and reaches a third of their size; on the training crops' warps (at most 40 frames), 0.93 and its full size.
+Trained on warps of up to 120 frames in 128-frame crops, clean clips read as re-timed too (threshold 11.2 frames):
+calibration subjects 26.8 %, bench 29.5 % (time_warp 1.8 %).
 
 Variants that lost (bench subjects 11-12, mean of the 7 families): 64 channels, 100 epochs: 31.8 % (its
 clean-clip threshold 6.7 frames: time_warp 1.2 %; at 3 % of clean clips, 2.4 frames: time_warp 17.3 but jitter
@@ -41,7 +56,13 @@ the network seeing the clip Gaussian-smoothed (``smooth=1.5`` frames, so that no
 validation loss 0.79-0.84 against 0.50-0.53, threshold 12 frames, 31.5 %. Not taken either: the estimate averaged
 with the clip's played backwards (its offsets reversed and negated; threshold 2.8 frames): calibration subjects
 34.1 -> 34.5 % (jitter 30.5 -> 34.1, frozen 70.0 -> 69.3), bench 36.3 -> 36.2 % (time_warp 18.6 -> 22.3, frozen
-71.6 -> 66.1): no gain worth twice the passes.
+71.6 -> 66.1): no gain worth twice the passes. The estimator reading the clip through the noise filter (capped), so
+that jitter would not read as timing (before the classifier's second opinion): bench 37.23 -> 36.91 % (jitter 35.6 ->
+37.2, time_warp 24.1 -> 23.0, frozen 71.6 -> 69.8). Runs grown while their offsets stay at 0.5 frames or more
+(hysteresis): calibration subjects 34.98 -> 34.89 %.
+A CMU estimator (the same network on CMU's training subjects, threshold 4.8 frames): CMU's own held-out clips 25.9 ->
+16.9 % (jitter 35.2 -> -14.0, wrong_anchor -2.1 -> -18.8, time_warp 0.0 -> 14.0; at a threshold of 7 or 10 frames
+20.0 / 19.9 %; with the classifier's second opinion 20.6 %: jitter 6.5, wrong_anchor -18.8), so the CMU weights hold none.
 """
 from __future__ import annotations
 
@@ -66,6 +87,9 @@ __all__ = ["BATCH_MARGIN", "TimingEstimator", "TimingNet", "timing_features", "r
 #: Frames: a clip whose estimated peak offset comes this close to the threshold is estimated alone
 #: (:meth:`TimingEstimator.retiming_offsets`); batched and single passes differ by about 1e-6 frames.
 BATCH_MARGIN = 1e-3
+#: A run the estimator would re-time is re-timed only where the flaw classifier's timing group reaches this probability
+#: somewhere in it (read on the clip as given; None: every run). See :func:`estimated_retiming`.
+TIMING_AGREEMENT = 0.8
 #: Training flaws drawn on top of some crops: everything but timing (their offsets are zero).
 OTHER_KINDS = GROUPS["pose"] + GROUPS["noise"] + GROUPS["root"]
 
@@ -330,6 +354,22 @@ class TimingEstimator(NetworkComponent):
         return self.threshold_
 
 
+def _timing_probability(refiner, clips: np.ndarray, candidates: np.ndarray) -> np.ndarray | None:
+    """``(B, T)``: the flaw classifier's timing-group probability on the ``candidates (B,)`` clips (0 elsewhere), each
+    clip near :data:`TIMING_AGREEMENT` read alone (batched passes differ in the last bits); None without a classifier."""
+    classifier = getattr(refiner, "flaw_classifier", None)
+    if classifier is None or TIMING_AGREEMENT is None:
+        return None
+    column = 1 + list(GROUPS).index("timing")
+    out = np.zeros(clips.shape[:2])
+    todo = np.flatnonzero(candidates)
+    if todo.size:
+        out[todo] = classifier.predict_all(clips[todo])[..., column]
+        for b in todo[np.abs(out[todo] - TIMING_AGREEMENT).min(1) < 1e-4] if todo.size > 1 else ():
+            out[b] = classifier.predict_all(clips[b : b + 1])[0, :, column]
+    return out
+
+
 def estimated_retiming(refiner, clips: np.ndarray, reports: list, mode: str) -> np.ndarray:
     """The refiner's re-timing step: ``clips (B, T, J, 3)`` with the runs its ``timing_estimator`` finds
     re-timed (a transition step: not in ``mode="anchor"``), each change written to its clip's report."""
@@ -337,10 +377,15 @@ def estimated_retiming(refiner, clips: np.ndarray, reports: list, mode: str) -> 
     if estimator is None or getattr(refiner, "retiming", "estimated") != "estimated" or mode == "anchor":
         return clips
     offsets = estimator.retiming_offsets(clips)
+    timing = _timing_probability(refiner, clips, np.abs(offsets).max(1) >= estimator.threshold_)
     out = clips.copy()
     for b, report in enumerate(reports):
         out[b], runs = retime_by_offsets(clips[b], offsets[b], estimator.threshold_, widen=estimator.widen,
                                          jumps=teleports(clips[b]))
+        if timing is not None:  # the classifier's second opinion: a run it does not read as a timing flaw stays as given
+            for lo, hi in [r for r in runs if timing[b, r[0] : r[1]].max() < TIMING_AGREEMENT]:
+                out[b][lo:hi] = clips[b][lo:hi]
+            runs = [r for r in runs if timing[b, r[0] : r[1]].max() >= TIMING_AGREEMENT]
         changed = np.zeros(len(out[b]), bool)
         for lo, hi in runs:
             changed[lo:hi] = True
