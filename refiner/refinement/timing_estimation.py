@@ -59,10 +59,9 @@ with the clip's played backwards (its offsets reversed and negated; threshold 2.
 71.6 -> 66.1): no gain worth twice the passes. The estimator reading the clip through the noise filter (capped), so
 that jitter would not read as timing (before the classifier's second opinion): bench 37.23 -> 36.91 % (jitter 35.6 ->
 37.2, time_warp 24.1 -> 23.0, frozen 71.6 -> 69.8). Runs grown while their offsets stay at 0.5 frames or more
-(hysteresis): calibration subjects 34.98 -> 34.89 %.
-A CMU estimator (the same network on CMU's training subjects, threshold 4.8 frames): CMU's own held-out clips 25.9 ->
-16.9 % (jitter 35.2 -> -14.0, wrong_anchor -2.1 -> -18.8, time_warp 0.0 -> 14.0; at a threshold of 7 or 10 frames
-20.0 / 19.9 %; with the classifier's second opinion 20.6 %: jitter 6.5, wrong_anchor -18.8), so the CMU weights hold none.
+(hysteresis): calibration subjects 34.98 -> 34.89 %. A CMU estimator (this network on CMU's training subjects,
+threshold 4.8 frames): CMU's held-out clips 25.9 -> 16.9 % (jitter 35.2 -> -14.0, wrong_anchor -2.1 -> -18.8,
+time_warp 0.0 -> 14.0; 20.0 / 19.9 % at 7 / 10 frames; 20.6 % with the second opinion): the CMU weights hold none.
 """
 from __future__ import annotations
 
@@ -82,7 +81,7 @@ from refiner.refinement.repair_candidates import teleports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 from refiner.refinement.training_flaws import GROUPS, synthesize
 
-__all__ = ["BATCH_MARGIN", "TimingEstimator", "TimingNet", "timing_features", "random_retiming", "retime_by_offsets", "OTHER_KINDS"]
+__all__ = ["BATCH_MARGIN", "TIMING_AGREEMENT", "TimingEstimator", "TimingNet", "timing_features", "random_retiming", "retime_by_offsets", "OTHER_KINDS"]
 
 #: Frames: a clip whose estimated peak offset comes this close to the threshold is estimated alone
 #: (:meth:`TimingEstimator.retiming_offsets`); batched and single passes differ by about 1e-6 frames.
