@@ -8,7 +8,7 @@ from refiner.core.skeletons import BoneProportions, rigid_skeleton, robust_bone_
 from refiner.core.skeletons import bone_lengths, joint_bone_lengths, with_bone_lengths
 from refiner.evaluation.physics import bone_length_variation
 from refiner.refinement.flaw_networks import FlawRepairNet, FrameTransformerConfig
-from refiner.refinement import learned_pipeline, timing_estimation
+from refiner.refinement import learned_pipeline
 from refiner.refinement.learned_pipeline import NOISE_RATIO, flag_runs, noise_ratio
 from refiner.refinement.pipeline import Refiner
 
@@ -30,7 +30,7 @@ def tiny_learned(humanact12, tmp_path_factory):
 
 
 @pytest.mark.real_data
-def test_tiny_training_installs_and_resumes(tiny_learned, humanact12, monkeypatch):
+def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     from refiner.refinement.train_learned import train_learned
 
     refiner, out = tiny_learned
@@ -62,10 +62,10 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12, monkeypatc
     _, report = flagged.refine(clip, return_report=True)
     assert not any(c.get("repair") == "estimated_retime" for c in report.changes)
     again.timing_estimator.threshold_ = 0.0
-    monkeypatch.setattr(timing_estimation, "TIMING_AGREEMENT", 1.01)  # the classifier's second opinion can veto every run
+    again.timing_agreement = 1.01  # the classifier's second opinion can veto every run
     _, report = again.refine(clip, return_report=True)
     assert not any(c.get("repair") == "estimated_retime" for c in report.changes)
-    monkeypatch.setattr(timing_estimation, "TIMING_AGREEMENT", None)  # the tiny classifier's opinion is not checked here
+    again.timing_agreement = None  # the tiny classifier's opinion is not checked here
     retimed, report = again.refine(clip, return_report=True)
     assert any(c.get("repair") == "estimated_retime" for c in report.changes)
     assert bone_length_variation(retimed) < 1e-3  # re-sampled frames go back on the clip's bone lengths

@@ -44,7 +44,7 @@ from refiner.refinement.report import RefinementReport
 from refiner.refinement.rigid_step import NATURAL_BONES_KEY
 from refiner.refinement.splicing import project_bone_lengths, splice
 from refiner.refinement.transition_refinement import TransitionRefiner
-from refiner.refinement.timing_estimation import TimingEstimator
+from refiner.refinement.timing_estimation import TIMING_AGREEMENT, TimingEstimator
 from refiner.refinement.transition_retiming import TransitionRetimer
 
 __all__ = ["Refiner", "RefinementReport", "refine", "MODES", "splice", "project_bone_lengths"]
@@ -96,6 +96,8 @@ class Refiner:
     retiming : {"estimated", "flagged", "stalls"}, optional
         ``"estimated"`` (default with a ``timing_estimator``): its runs re-timed before detection, then as "flagged":
         flagged retraces cut (:mod:`refiner.refinement.retrace`) and flagged stalls re-timed; ``"stalls"``: stalls only.
+    timing_agreement : float or None, default=0.8
+        An estimated run is re-timed where the flaw classifier's timing group reaches it (None, a generator's: every run).
     denoising : {"filter", "throughout", "flagged"}, optional
         ``"filter"`` (default when there is a ``noise_filter``): runs the flaw classifier's noise group finds, then
         clips noisy throughout, are denoised last; ``"throughout"``: the latter only; ``"flagged"``: neither.
@@ -144,6 +146,7 @@ class Refiner:
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True, natural_bones: float | None = None, retiming: str | None = None,
+                 timing_agreement: float | None = TIMING_AGREEMENT,
                  denoising: str | None = None, amplitude: str = "keep", posing: str = "prior", texture: str = "off",
                  concept_snap: float = 0.0, misread_snap: float = 0.0,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
@@ -204,8 +207,10 @@ class Refiner:
         self.rigid_core = check_flag("rigid_core", rigid_core)
         self.rigid_lengths = check_choice("rigid_lengths", rigid_lengths or (
             "median" if self.bone_proportions is None else "proportions"), RIGID_LENGTHS)
-        self.retiming = check_choice("retiming", retiming or ("flagged" if timing_estimator is None else "estimated"),
-                                     RETIMING)
+        self.retiming = check_choice("retiming", retiming or ("flagged" if timing_estimator is None else "estimated"), RETIMING)
+        if timing_agreement is not None and (isinstance(timing_agreement, bool) or not 0 <= timing_agreement <= 1):
+            raise ValueError(f"`timing_agreement` must be None or a probability in [0, 1]; got {timing_agreement!r}.")
+        self.timing_agreement = timing_agreement
         self.denoising = check_choice("denoising", denoising or ("flagged" if noise_filter is None else "filter"), DENOISING)
         for option, value, part, name in (("retiming", self.retiming, timing_estimator, "timing_estimator"),
                                           ("denoising", self.denoising, noise_filter, "noise_filter")):

@@ -30,13 +30,12 @@ subjects 9-10 (1 % re-timed: 1.65 frames), severity 2, mean of the 7 families re
   kinks of linear interpolation, which generators do not make): time_warp -0.4 -> 23.6 %, frozen 57.4 ->
   72.1, reversed 32.5 -> 33.8: it reads the timing, not the resampling.
 
-A run is re-timed only where the flaw classifier's timing group agrees (:data:`TIMING_AGREEMENT`: its probability
-reaches 0.8 somewhere in the run, read on the clip as given). Of the runs the estimator alone re-timed on the
-calibration subjects, the glides', drifts' and clean clips' made them worse (20 of 21, 5 of 5, 2 of 2), and the
-classifier read most of them as no timing flaw. Chosen on the calibration subjects (mean 34.98 % without it; 35.48 /
-35.69 / 35.96 / 35.83 / 35.81 % at 0.3 / 0.5 / 0.8 / 0.9 / 0.95); bench subjects 11-12: 37.23 -> 37.75 % (jitter 35.6
--> 37.6, foot_sliding 52.6 -> 53.8, frozen 71.6 -> 72.0, reversed 35.4 either way, time_warp 24.1 -> 24.2), clean
-clips 0.008 -> 0.003 cm, 3.3 -> 1.8 % touched.
+A run is re-timed only where the flaw classifier's timing group agrees (``Refiner(timing_agreement=0.8)``: its
+probability reaches 0.8 somewhere in the run, read on the clip as given; a generator's clips: every run). Of the runs
+the estimator alone re-timed on the calibration subjects, the glides', drifts' and clean clips' made them worse (20 of
+21, 5 of 5, 2 of 2), read mostly as no timing flaw. Chosen there (34.98 % without; 35.48 / 35.69 / 35.96 / 35.83 /
+35.81 % at 0.3 / 0.5 / 0.8 / 0.9 / 0.95); bench subjects 11-12: 37.23 -> 37.75 % (jitter 35.6 -> 37.6, foot_sliding
+52.6 -> 53.8, frozen 71.6 -> 72.0, time_warp 24.1 -> 24.2), clean clips 0.008 -> 0.003 cm, 3.3 -> 1.8 % touched.
 
 The crops turned at random (``turn``) took the validation loss from 0.51 to 0.41 (the all-subject set's, on
 subjects 11-12, 0.80 to 0.69) and the clean-clip threshold from 3.1 to 1.65 frames; unturned, the same network
@@ -60,8 +59,8 @@ with the clip's played backwards (its offsets reversed and negated; threshold 2.
 that jitter would not read as timing (before the classifier's second opinion): bench 37.23 -> 36.91 % (jitter 35.6 ->
 37.2, time_warp 24.1 -> 23.0, frozen 71.6 -> 69.8). Runs grown while their offsets stay at 0.5 frames or more
 (hysteresis): calibration subjects 34.98 -> 34.89 %. A CMU estimator (this network on CMU's training subjects,
-threshold 4.8 frames): CMU's held-out clips 25.9 -> 16.9 % (jitter 35.2 -> -14.0, wrong_anchor -2.1 -> -18.8,
-time_warp 0.0 -> 14.0; 20.0 / 19.9 % at 7 / 10 frames; 20.6 % with the second opinion): the CMU weights hold none.
+threshold 4.8 frames): CMU's held-out clips 25.9 -> 16.9 % (jitter 35.2 -> -14.0, wrong_anchor -2.1 -> -18.8, time_warp
+0.0 -> 14.0; 20.0 / 19.9 % at 7 / 10 frames; 20.6 % with the second opinion): the CMU weights hold none.
 """
 from __future__ import annotations
 
@@ -86,8 +85,7 @@ __all__ = ["BATCH_MARGIN", "TIMING_AGREEMENT", "TimingEstimator", "TimingNet", "
 #: Frames: a clip whose estimated peak offset comes this close to the threshold is estimated alone
 #: (:meth:`TimingEstimator.retiming_offsets`); batched and single passes differ by about 1e-6 frames.
 BATCH_MARGIN = 1e-3
-#: A run the estimator would re-time is re-timed only where the flaw classifier's timing group reaches this probability
-#: somewhere in it (read on the clip as given; None: every run). See :func:`estimated_retiming`.
+#: ``Refiner(timing_agreement=)``'s default: see :func:`estimated_retiming`.
 TIMING_AGREEMENT = 0.8
 #: Training flaws drawn on top of some crops: everything but timing (their offsets are zero).
 OTHER_KINDS = GROUPS["pose"] + GROUPS["noise"] + GROUPS["root"]
@@ -353,38 +351,40 @@ class TimingEstimator(NetworkComponent):
         return self.threshold_
 
 
-def _timing_probability(refiner, clips: np.ndarray, candidates: np.ndarray) -> np.ndarray | None:
+def _timing_probability(refiner, clips: np.ndarray, candidates: np.ndarray, agreement) -> np.ndarray | None:
     """``(B, T)``: the flaw classifier's timing-group probability on the ``candidates (B,)`` clips (0 elsewhere), each
-    clip near :data:`TIMING_AGREEMENT` read alone (batched passes differ in the last bits); None without a classifier."""
+    clip near ``agreement`` read alone (batched passes differ in the last bits); None without a classifier or agreement."""
     classifier = getattr(refiner, "flaw_classifier", None)
-    if classifier is None or TIMING_AGREEMENT is None:
+    if classifier is None or agreement is None:
         return None
     column = 1 + list(GROUPS).index("timing")
     out = np.zeros(clips.shape[:2])
     todo = np.flatnonzero(candidates)
     if todo.size:
         out[todo] = classifier.predict_all(clips[todo])[..., column]
-        for b in todo[np.abs(out[todo] - TIMING_AGREEMENT).min(1) < 1e-4] if todo.size > 1 else ():
+        for b in todo[np.abs(out[todo] - agreement).min(1) < 1e-4] if todo.size > 1 else ():
             out[b] = classifier.predict_all(clips[b : b + 1])[0, :, column]
     return out
 
 
 def estimated_retiming(refiner, clips: np.ndarray, reports: list, mode: str) -> np.ndarray:
-    """The refiner's re-timing step: ``clips (B, T, J, 3)`` with the runs its ``timing_estimator`` finds
-    re-timed (a transition step: not in ``mode="anchor"``), each change written to its clip's report."""
+    """The refiner's re-timing step: ``clips (B, T, J, 3)`` with the runs its ``timing_estimator`` finds re-timed (a
+    transition step: not in ``mode="anchor"``) where the flaw classifier's timing group, read on the clip as given,
+    reaches the refiner's ``timing_agreement`` somewhere in the run (None: every run), each change in its clip's report."""
     estimator = getattr(refiner, "timing_estimator", None)
     if estimator is None or getattr(refiner, "retiming", "estimated") != "estimated" or mode == "anchor":
         return clips
     offsets = estimator.retiming_offsets(clips)
-    timing = _timing_probability(refiner, clips, np.abs(offsets).max(1) >= estimator.threshold_)
+    agreement = getattr(refiner, "timing_agreement", TIMING_AGREEMENT)
+    timing = _timing_probability(refiner, clips, np.abs(offsets).max(1) >= estimator.threshold_, agreement)
     out = clips.copy()
     for b, report in enumerate(reports):
         out[b], runs = retime_by_offsets(clips[b], offsets[b], estimator.threshold_, widen=estimator.widen,
                                          jumps=teleports(clips[b]))
         if timing is not None:  # the classifier's second opinion: a run it does not read as a timing flaw stays as given
-            for lo, hi in [r for r in runs if timing[b, r[0] : r[1]].max() < TIMING_AGREEMENT]:
+            for lo, hi in [r for r in runs if timing[b, r[0] : r[1]].max() < agreement]:
                 out[b][lo:hi] = clips[b][lo:hi]
-            runs = [r for r in runs if timing[b, r[0] : r[1]].max() >= TIMING_AGREEMENT]
+            runs = [r for r in runs if timing[b, r[0] : r[1]].max() >= agreement]
         changed = np.zeros(len(out[b]), bool)
         for lo, hi in runs:
             changed[lo:hi] = True
