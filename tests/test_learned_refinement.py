@@ -25,6 +25,8 @@ def tiny_learned(humanact12, tmp_path_factory):
     out = tmp_path_factory.mktemp("tiny_learned")
     for optional in ("flaw_denoiser", "motion_infiller", "timing_estimator"):  # optional parts, installed with the others
         assert train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", only=optional) is None
+    for part in ("noise_filter", "noise_residual"):  # the residual behind this run's filter, found in out/parts
+        assert train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", only=part) is None
     refiner = train_learned_refiner(humanact12.subset(pick), out, config="tiny", device="cpu", base=SHIPPED_TRAIN)
     return refiner, out
 
@@ -44,6 +46,8 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert again.timing_estimator is not None and again.retiming == "estimated"
     assert again.noise_filter is not None and again.denoising == "filter" and again.noise_filter.half_width == 1
     assert again.manifest["learned"]["noise_threshold_m"] == pytest.approx(again.noise_filter.threshold_)
+    assert again.noise_residual is not None and again.noise_residual.half_width_ == 1 and again.noise_residual.hidden == 8
+    assert again.manifest["learned"]["noise_residual"]["fit_clips"] > 0
     assert 0 < again.natural_bones == again.manifest["learned"]["natural_bone_variation"] < 1e-4  # mocap's exact bones
     assert again.amplitude_restorer is not None and 0 < again.amplitude_restorer.gate_ < 1
     assert again.manifest["learned"]["amplitude_gate"] == pytest.approx(again.amplitude_restorer.gate_)
@@ -78,11 +82,12 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
             retiming="estimated")
     x = humanact12[10].joints[:50]
     np.testing.assert_allclose(again.flaw_recognizer.predict(x[None])["flaw"],
-                               refiner.flaw_recognizer.predict(x[None])["flaw"], atol=1e-3)  # float16 weights
+                               refiner.flaw_recognizer.predict(x[None])["flaw"], atol=1e-3)  # int8 weights
     before = (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns
     parts = train_learned(humanact12.subset(range(24)), out, config="tiny", device="cpu")
     assert set(parts) == {"flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer",
-                          "pose_prior", "texture_filter", "flaw_denoiser", "motion_infiller", "timing_estimator"}
+                          "pose_prior", "texture_filter", "flaw_denoiser", "motion_infiller", "timing_estimator",
+                          "noise_residual"}
     assert (out / "parts" / "flaw_repairer.safetensors").stat().st_mtime_ns == before  # loaded, not retrained
 
 

@@ -26,11 +26,11 @@ def train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--learned", action="store_true",
                    help="train only the learned steps (flaw recognition and repair, the default method) and add them "
-                        "to the refiner in --base; --only flaw_classifier / flaw_recognizer / flaw_repairer / noise_filter / amplitude_restorer / pose_prior / texture_filter / flaw_denoiser / motion_infiller / timing_estimator "
+                        "to the refiner in --base; --only flaw_classifier / flaw_recognizer / flaw_repairer / noise_filter / amplitude_restorer / pose_prior / texture_filter / flaw_denoiser / motion_infiller / timing_estimator / noise_residual "
                         "trains one of them")
     p.add_argument("--base", type=Path, default=None,
                    help="with --learned: refiner folder whose concept and paper parts are kept (default: shipped weights of --split); "
-                        "with --only and an optional part (flaw_denoiser, motion_infiller, timing_estimator): the refiner "
+                        "with --only and an optional part (flaw_denoiser, motion_infiller, timing_estimator, noise_residual): the refiner "
                         "it is calibrated for and added to, written to --out")
 
 

@@ -42,7 +42,8 @@ TEXTURE = ("auto", "all", "off")
 GENERATOR_OPTIONS = {"texture": "all", "amplitude": "restore", "misread_snap": 1.0, "timing_agreement": None}
 #: Shortest clip refined; shorter ones pass through unchanged (reported).
 MIN_FRAMES = 8
-#: ``threads="auto"`` uses more than one thread from this many clips in a batch on.
+#: ``threads="auto"`` uses more than one thread from this many clips in a batch on (2-core CPU: a 60-frame clip took
+#: 12 ms on one thread, 113 ms on two; a batch of 256 went at 515 and 742 clips/s).
 AUTO_THREADS_BATCH = 32
 
 

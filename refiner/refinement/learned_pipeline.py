@@ -329,7 +329,8 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                                                           for (lo, hi), _ in runs_per_clip[b])]
             proposals["noise_filter"] = clips[todo].copy()
             if noisy:
-                proposals["noise_filter"][noisy] = refiner.noise_filter.denoise(clips[todo][noisy])
+                proposals["noise_filter"][noisy] = refiner.noise_filter.denoise(
+                    clips[todo][noisy], residual=getattr(refiner, "noise_residual", None))
         if "motion_infill" in typed and refiner.motion_infiller is not None:
             proposals["motion_infill"] = refiner.motion_infiller.infill(clips[todo], suspect[todo])
         skel = get_skeleton(refiner.skeleton)

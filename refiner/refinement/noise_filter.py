@@ -231,16 +231,22 @@ class NoiseFilter(NetworkComponent):
         low = (sigma < grid[0])[..., None, None]
         return x + np.where(low, below * c[b, 0, t], (1 - frac) * c[b, hi - 1, t] + frac * c[b, hi, t])
 
-    def denoise(self, joints: np.ndarray, frames: np.ndarray | None = None, *, capped: bool = False) -> np.ndarray:
+    def denoise(self, joints: np.ndarray, frames: np.ndarray | None = None, *, capped: bool = False,
+                residual=None) -> np.ndarray:
         """Every frame of a batch ``(B, T, J, 3)`` metres (or only ``frames (B, T)`` bool) denoised at its own
         estimated level (for frames known to be noisy), no joint moved further than noise of that level would
-        have moved it where ``capped``; ``(B, T, J, 3)`` float32, other frames exactly as given."""
+        have moved it where ``capped``, then corrected by a fitted ``residual``
+        (:class:`~refiner.refinement.noise_residual.NoiseResidual`); ``(B, T, J, 3)`` float32, other frames exactly
+        as given."""
         x = self._checked(joints)
         levels = self._levels(self._reference(x))
         if frames is not None:
             levels = np.where(np.broadcast_to(np.asarray(frames, bool), levels.shape), levels, 0.0)
         move = self._at_level(x, levels, self._corrections(x)) - x
-        return (x + (self._capped(move, levels) if capped else move)).astype(np.float32)
+        move = self._capped(move, levels) if capped else move
+        if residual is not None:
+            move = move + residual.correction(x, move, levels)
+        return (x + move).astype(np.float32)
 
     def _capped(self, move: np.ndarray, level: np.ndarray) -> np.ndarray:
         """``move (B, T, J, 3)`` with each joint's step cut to ``max_move`` times what noise of ``level (B, T)``
@@ -310,7 +316,8 @@ def denoised_noise_runs(refiner, clips: np.ndarray, reports: list, noise_probabi
     todo = np.flatnonzero(keep.any(1))
     if not todo.size:
         return clips
-    denoised = refiner.noise_filter.denoise(clips[todo], keep[todo], capped=True)
+    denoised = refiner.noise_filter.denoise(clips[todo], keep[todo], capped=True,
+                                            residual=getattr(refiner, "noise_residual", None))
     return _put_back(refiner, clips, denoised, todo, reports, lambda b, n: (
         f"a noise run ({n} frames changed): the noise-group probability passed {NOISE_PROBABILITY:g} for "
         f"{NOISE_RUN} frames or more (grown while above {NOISE_LOW:g}; the flaw probability under its threshold), "

@@ -38,13 +38,14 @@ from refiner.refinement.inputs import (AMPLITUDE, DENOISING, METHODS, MODES, POS
                                        auto_threads, check_choice, check_choices, check_flag, check_metres, check_metres_each, check_threads, thread_limits)
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
+from refiner.refinement.noise_residual import NoiseResidual, check_residual
 from refiner.refinement.pose_prior import PosePrior
-from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.report import RefinementReport
+from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.rigid_step import NATURAL_BONES_KEY
 from refiner.refinement.splicing import project_bone_lengths, splice
-from refiner.refinement.transition_refinement import TransitionRefiner
 from refiner.refinement.timing_estimation import TIMING_AGREEMENT, TimingEstimator
+from refiner.refinement.transition_refinement import TransitionRefiner
 from refiner.refinement.transition_retiming import TransitionRetimer
 
 __all__ = ["Refiner", "RefinementReport", "refine", "MODES", "splice", "project_bone_lengths"]
@@ -54,7 +55,7 @@ _PARTS = {"recognizer": AnchorRecognizer, "anchor_refiner": AnchorRefiner, "tran
           "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer, "flaw_classifier": FlawClassifier,
           "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator,
           "noise_filter": NoiseFilter, "amplitude_restorer": AmplitudeRestorer, "pose_prior": PosePrior,
-          "texture_filter": TextureFilter}
+          "texture_filter": TextureFilter, "noise_residual": NoiseResidual}
 _NO_DEVICE = ("anchor_concepts", "anchor_quality", "amplitude_restorer")
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 #: Thresholds a manifest's ``calibration`` entry may hold; they belong to the steps, which save them.
@@ -85,9 +86,10 @@ class Refiner:
         by ``margin=2``, extended while the score stays above ``hysteresis=0.5`` of it; ``change_penalty=0.01``
         is the flaw probability a ``"select"`` candidate must gain per centimetre; a clip whose bone lengths
         vary more than ``rigid_tolerance=0.005`` (std / mean; mocap: under 0.001 %) is put back on rigid bones.
-    timing_estimator, noise_filter, amplitude_restorer, pose_prior, texture_filter : optional
+    timing_estimator, noise_filter, noise_residual, amplitude_restorer, pose_prior, texture_filter : optional
         The learned re-timing step (:mod:`refiner.refinement.timing_estimation`), noise filter
-        (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead),
+        (:mod:`refiner.refinement.noise_filter`; without it, flagged noise runs are smoothed instead) and the network
+        that corrects what it leaves of a noise run (:mod:`refiner.refinement.noise_residual`),
         amplitude step (:mod:`refiner.refinement.amplitude`; "restore" for a generator's clips, the default "keep"), pose prior
         (:mod:`refiner.refinement.pose_prior`; ``posing="keep"`` skips it) and texture filter
         (:mod:`refiner.refinement.texture_filter`, last, on the clips ``texture`` names: "off", the default (a mocap
@@ -124,9 +126,8 @@ class Refiner:
     blend : int, default=4
         Frames over which a change is tapered in at each kept side.
     threads : int, "auto" or None, default="auto"
-        torch intra-op (and BLAS) threads while refining, restored afterwards (2-core CPU: a 60-frame clip took
-        12 ms on one thread, 113 ms on two; a batch of 256 went at 515 and 742 clips/s). ``"auto"``: one thread
-        under :data:`~refiner.refinement.inputs.AUTO_THREADS_BATCH` clips, else the cores up to 4; None: torch's.
+        torch intra-op (and BLAS) threads while refining, restored afterwards (``"auto"``: one thread under
+        :data:`~refiner.refinement.inputs.AUTO_THREADS_BATCH` clips, else the cores up to 4; None: torch's).
     manifest : dict, optional
         Provenance of the weights (dataset, split, licence, hashes) and ``calibration``, the record of
         :meth:`calibrate`. Thresholds found there (``anchor_threshold``; ``transition_thresholds`` or
@@ -135,14 +136,13 @@ class Refiner:
     Attributes
     ----------
     transition_retimer : TransitionRetimer
-        The re-timing transition step (``transition_method="retime"``); its thresholds are saved in
-        the manifest's ``calibration``.
+        The re-timing transition step (``transition_method="retime"``); its thresholds go in the manifest's ``calibration``.
     """
 
     def __init__(self, recognizer, anchor_refiner, transition_generator, transition_refiner, anchor_concepts,
                  anchor_quality=None, flaw_recognizer=None, flaw_repairer=None, flaw_classifier=None,
                  flaw_denoiser=None, motion_infiller=None, timing_estimator=None, noise_filter=None,
-                 amplitude_restorer=None, pose_prior=None, texture_filter=None, *,
+                 amplitude_restorer=None, pose_prior=None, texture_filter=None, noise_residual=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
                  rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True, natural_bones: float | None = None, retiming: str | None = None,
@@ -156,8 +156,9 @@ class Refiner:
         self.transition_generator, self.transition_refiner = transition_generator, transition_refiner
         self.flaw_recognizer, self.flaw_repairer, self.flaw_classifier = flaw_recognizer, flaw_repairer, flaw_classifier
         self.flaw_denoiser, self.motion_infiller, self.timing_estimator = flaw_denoiser, motion_infiller, timing_estimator
-        self.noise_filter, self.amplitude_restorer, self.pose_prior = noise_filter, amplitude_restorer, pose_prior
-        self.texture_filter, self.texture = texture_filter, check_choice("texture", texture, TEXTURE)
+        self.noise_filter, self.amplitude_restorer = noise_filter, amplitude_restorer
+        self.noise_residual = check_residual(noise_filter, noise_residual)
+        self.pose_prior, self.texture_filter, self.texture = pose_prior, texture_filter, check_choice("texture", texture, TEXTURE)
         self.amplitude, self.posing = check_choice("amplitude", amplitude, AMPLITUDE), check_choice("posing", posing, POSING)
         learned = flaw_recognizer is not None and flaw_repairer is not None
         self.method = check_choice("method", method or ("learned" if learned else "concepts"), METHODS)
@@ -178,16 +179,15 @@ class Refiner:
                 raise ValueError(f"{option}={getattr(self, option)!r} needs a `flaw_classifier`.")
         if learned and "denoiser" in self.detect.split("+") and flaw_denoiser is None:
             raise ValueError(f"detect={self.detect!r} needs a `flaw_denoiser`, which these weights lack.")
-        self.min_run, self.margin, self.rigid_tolerance = int(min_run), int(margin), float(rigid_tolerance)
-        self.change_penalty, self.hysteresis = float(change_penalty), float(hysteresis)
+        self.min_run, self.margin, self.rigid_tolerance, self.change_penalty, self.hysteresis = (
+            int(min_run), int(margin), float(rigid_tolerance), float(change_penalty), float(hysteresis))
         self.quality = check_choice("quality", quality, concepts_pipeline.QUALITY)
         self.anchor_method = check_choice("anchor_method", anchor_method, concepts_pipeline.ANCHOR_METHODS)
         self.transition_method = check_choice("transition_method", transition_method, concepts_pipeline.TRANSITION_METHODS)
         if self.method == "concepts" and anchor_quality is None and (quality == "pose" or anchor_method == "posterior"):
             raise ValueError("quality='pose' and anchor_method='posterior' need an `anchor_quality` model.")
         self.anchor_noise, self.blend, self.threads = anchor_noise, blend, check_threads(threads)
-        self.skeleton = get_skeleton(skeleton).name
-        self.action_names = tuple(action_names)
+        self.skeleton, self.action_names = get_skeleton(skeleton).name, tuple(action_names)
         self.mode = check_choice("mode", mode, MODES)
         self.manifest = manifest or {}
         self.natural_bones = check_strength(self.manifest.get("learned", {}).get(NATURAL_BONES_KEY, 0.0) if natural_bones

@@ -26,6 +26,7 @@ from refiner.refinement.infilling import MotionInfiller
 from refiner.refinement.amplitude import AmplitudeRestorer
 from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 from refiner.refinement.noise_filter import NoiseFilter
+from refiner.refinement.noise_residual import NoiseResidual
 from refiner.refinement.pipeline import _PARTS, _WEIGHTS, Refiner
 from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.rigid_step import NATURAL_BONES_KEY
@@ -42,12 +43,15 @@ __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned"
 #: version, in an older pipeline); the shipped 80-channel one (unturned) at 0.5 / 1 %: 33.9 / 34.1 %, 30.7 without it.
 TIMING_CLIP_RATE = 0.01
 #: Parts whose weight matrices the shipped sets store as int8 codes (``NetworkComponent.save(int8=True)``): the
-#: paper's (see their manifests' notes) and the timing estimator (0.70 MB instead of 1.36; its offsets move by
-#: 0.04 frames at most on held-out clips, against a threshold of about 3.7).
-STORED_INT8 = ("recognizer", "anchor_refiner", "transition_generator", "timing_estimator")
+#: paper's (see their manifests' notes), the timing estimator (0.70 MB instead of 1.36; its offsets move by
+#: 0.04 frames at most on held-out clips, against a threshold of about 3.7), the flaw recogniser (0.45 MB instead of
+#: 0.85) and the noise residual (0.24 MB instead of 0.47): `bench flaws` as with float16 (38.36 %, every family and
+#: the clean clips within 0.01).
+STORED_INT8 = ("recognizer", "anchor_refiner", "transition_generator", "timing_estimator", "flaw_recognizer",
+               "noise_residual")
 #: The manifest key (under ``learned``) of each optional part's threshold.
 _THRESHOLD_KEYS = {"flaw_denoiser": "denoiser_threshold_m", "motion_infiller": None,
-                   "timing_estimator": "timing_threshold_frames"}
+                   "timing_estimator": "timing_threshold_frames", "noise_residual": None}
 #: Layouts refined through HumanAct12 weights (``Refiner.pretrained`` gives them a ConvertedRefiner).
 CONVERTED_SKELETONS = ("uestc", "humanml3d")
 #: Share of held-out real clips each detector may flag (both together: at most twice this).
@@ -89,16 +93,20 @@ NOISE_FILTER_CONFIGS = {"default": {}, "tiny": dict(half_width=1, copies=1, rigi
 #: Parts trained only when asked (``only=``): the denoiser and the motion in-filler serve options of the
 #: refiner (see :data:`refiner.refinement.learned_pipeline.TYPED_REPAIRS`); once trained into ``out/parts``
 #: they are calibrated and installed with the others.
-OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller", "timing_estimator")
+OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller", "timing_estimator", "noise_residual")
 #: The timing estimator's settings (about 20 minutes on one CPU core) and its tiny test version.
 TIMING_CONFIGS = {"default": dict(schedule=dict()),
                   "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
+#: The noise residual's settings (behind the noise filter of the same run, else of ``base``: about 4 minutes on one CPU
+#: core) and its tiny test version.
+NOISE_RESIDUAL_CONFIGS = {"default": dict(schedule=dict()),
+                          "tiny": dict(hidden=8, copies=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
             "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator,
             "noise_filter": NoiseFilter, "amplitude_restorer": AmplitudeRestorer, "pose_prior": PosePrior,
-            "texture_filter": TextureFilter}
+            "texture_filter": TextureFilter, "noise_residual": NoiseResidual}
 _CONFIGS = {"flaw_classifier": CLASSIFIER_CONFIGS, "flaw_denoiser": CORRECTION_CONFIGS, "motion_infiller": CORRECTION_CONFIGS,
-            "timing_estimator": TIMING_CONFIGS, "pose_prior": POSE_PRIOR_CONFIGS,
+            "timing_estimator": TIMING_CONFIGS, "pose_prior": POSE_PRIOR_CONFIGS, "noise_residual": NOISE_RESIDUAL_CONFIGS,
             "texture_filter": TEXTURE_FILTER_CONFIGS}
 
 
@@ -114,9 +122,10 @@ def calibration_split(subjects) -> np.ndarray:
 
 def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all", config: str = "default",
                   only: str | None = None, device: str = "auto", random_state: int = 0, max_seconds: float | None = None,
-                  anchor_concepts: AnchorConcepts | None = None, progress: bool = False) -> dict:
+                  anchor_concepts: AnchorConcepts | None = None, progress: bool = False, base: str | Path | None = None) -> dict:
     """Train the learned parts (:data:`LEARNED_PARTS`), or the one named ``only`` (which may be one of
-    :data:`OPTIONAL_PARTS`), into ``out/parts/`` (checkpoints there make a rerun resume).
+    :data:`OPTIONAL_PARTS`), into ``out/parts/`` (checkpoints there make a rerun resume). The noise residual is
+    trained behind this run's noise filter, else the one in ``base`` (default: the shipped weights of ``split``).
 
     Returns ``{name: fitted part}`` for the parts trained or found finished (with ``only=None``, the
     optional parts found there too).
@@ -164,8 +173,11 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         cfg = dict(_CONFIGS.get(name, LEARNED_CONFIGS)[config])
         schedule = replace(cls().schedule, **cfg.pop("schedule"), **run)
         est = cls(**cfg, schedule=schedule, random_state=random_state)
-        if name in ("flaw_classifier", "flaw_denoiser", "motion_infiller", "timing_estimator", "pose_prior",
-                    "texture_filter"):  # action-agnostic
+        if name == "noise_residual":
+            est.fit(pick(fit_idx)[0], _noise_filter_behind(done, parts_dir, dataset, split, base),
+                    skeleton=skeleton, validation=pick(cal_idx)[0], checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
+        elif name in ("flaw_classifier", "flaw_denoiser", "motion_infiller", "timing_estimator", "pose_prior",
+                      "texture_filter"):  # action-agnostic
             est.fit(pick(fit_idx)[0], skeleton=skeleton, validation=pick(cal_idx)[0],
                     checkpoint=parts_dir / f"{name}.checkpoint.safetensors")
         elif name == "flaw_recognizer":
@@ -181,7 +193,8 @@ def train_learned(dataset: MotionDataset, out: str | Path, *, split: str = "all"
         est.save(parts_dir / f"{name}.safetensors")
         (parts_dir / f"{name}.json").write_text(json.dumps({
             "seconds": round(time.perf_counter() - t0, 1), "split": split, "fit_clips": int(len(fit_idx)),
-            "calibration_clips": int(len(cal_idx)), "steps": len(est.history_) * est.schedule.steps_per_epoch,
+            "calibration_clips": int(len(cal_idx)), "epochs": len(est.history_),
+            "steps": len(est.history_) * est.schedule.steps_per_epoch if est.schedule.steps_per_epoch else None,
             "history": est.history_[-3:]}, indent=1))
         done[name] = est
     return done
@@ -203,6 +216,7 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.amplitude_restorer = parts.get("amplitude_restorer")
     refiner.pose_prior = parts.get("pose_prior")
     refiner.texture_filter = parts.get("texture_filter")
+    refiner.noise_residual = parts.get("noise_residual")
     refiner.denoising = "filter" if refiner.noise_filter is not None else "flagged"
     refiner.retiming = "estimated" if refiner.timing_estimator is not None else "flagged"
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
@@ -256,14 +270,13 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
                           only: str | None = None, **kwargs):
     """Train the learned steps (:func:`train_learned`) and save them with the parts of the refiner in
     ``base`` (default: the shipped weights of ``split``) to ``out``; None when ``only`` trains one part."""
-    parts = train_learned(dataset, out, split=split, only=only, **kwargs)
+    parts = train_learned(dataset, out, split=split, only=only, base=base, **kwargs)
     if only in OPTIONAL_PARTS and base is not None:  # one option added to a finished refiner
         return add_optional_part(parts[only], only, dataset, out, split=split, base=base)
     if only is not None:
         return None
     natural = calibrate_learned(parts, dataset, split=split)[NATURAL_BONES_KEY]  # the parts keep their thresholds
-    if base is None:
-        base = _WEIGHTS / (f"{dataset.name}" + ("" if split == "all" else f"-{split}"))
+    base = _default_base(dataset, split) if base is None else base
     info = {}
     for name in LEARNED_PARTS + OPTIONAL_PARTS:
         log_path = Path(out) / "parts" / f"{name}.json"
@@ -271,6 +284,25 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
             info[name] = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"}
     return install_learned(base, parts, out=out, info={"split": split, **bone_proportion_records(dataset.split(split)),
                                                         NATURAL_BONES_KEY: natural, **info})
+
+
+def _default_base(dataset: MotionDataset, split: str) -> Path:
+    """The shipped weights of ``dataset`` and ``split``."""
+    return _WEIGHTS / (f"{dataset.name}" + ("" if split == "all" else f"-{split}"))
+
+
+def _noise_filter_behind(done: dict, parts_dir: Path, dataset: MotionDataset, split: str, base) -> NoiseFilter:
+    """The noise filter a noise residual is trained behind: this run's (trained or in ``parts_dir``), else the one of
+    the refiner in ``base`` (default: the shipped weights of ``split``)."""
+    if "noise_filter" in done:
+        return done["noise_filter"]
+    if (parts_dir / "noise_filter.safetensors").is_file():
+        return NoiseFilter.load(parts_dir / "noise_filter.safetensors")
+    _, paths = read_refiner_manifest(_default_base(dataset, split) if base is None else base, _PARTS)
+    if "noise_filter" not in paths:
+        raise ValueError("the noise residual is trained behind a noise filter: train one in the same run "
+                         "(`--only noise_filter`) or give a `base` whose weights hold one.")
+    return NoiseFilter.load(paths["noise_filter"])
 
 
 def add_optional_part(part, name: str, dataset: MotionDataset, out: str | Path, *, split: str = "all",
