@@ -10,6 +10,7 @@ parallel processes, then ``assemble``; ``SPLIT`` is ``train``, the default, for 
     python examples/train_cmu_weights.py OUT noise_filter [SPLIT]          # closed form, about a minute
     python examples/train_cmu_weights.py OUT amplitude_restorer [SPLIT]    # medians, seconds (not shipped)
     python examples/train_cmu_weights.py OUT pose_prior [SPLIT]            # about 8 minutes
+    python examples/train_cmu_weights.py OUT noise_residual [SPLIT]        # after noise_filter, about 3 minutes
     python examples/train_cmu_weights.py OUT assemble [SPLIT] [FOLDER]     # default FOLDER: OUT/refiner
 
 Split ``all`` is not shipped: calibrated on its two highest-numbered subjects (133, 136; 59 clips) it
@@ -57,7 +58,7 @@ if split not in ("train", "all"):
     raise SystemExit(f"unknown split {split!r}; known: train, all")
 train = load_cmu_mocap().split(split)
 train = train.subset(np.flatnonzero([len(m.joints) >= MIN_FRAMES for m in train]))
-if stage in tl.LEARNED_PARTS:
+if stage in tl.LEARNED_PARTS or stage == "noise_residual":  # the residual behind OUT/parts' noise filter
     if stage == "flaw_recognizer":
         tl.LEARNED_CONFIGS["cmu"]["schedule"] = dict(tl.LEARNED_CONFIGS["default"]["schedule"], n_epochs=RECOGNIZER_EPOCHS)
     config = "cmu" if stage in ("flaw_recognizer", "flaw_repairer") else "default"  # the others have their own tables
@@ -74,7 +75,7 @@ elif stage == "assemble":
     manifest = {"dataset": "cmu_mocap", "split": split, "config": "default (flaw recogniser: 10 epochs)",
                 "clips": len(train), "subjects": sorted(set(int(s) for s in train.subjects)), "licence": CMU_LICENCE,
                 "command": f"python examples/train_cmu_weights.py OUT {{flaw_classifier,flaw_recognizer,flaw_repairer,"
-                           f"noise_filter,amplitude_restorer,pose_prior,assemble}} {split}",
+                           f"noise_filter,amplitude_restorer,pose_prior,noise_residual,assemble}} {split}",
                 "notes": ["learned steps only: method='concepts' (the paper's parts) is not available for these weights",
                           f"training clips of at least {MIN_FRAMES} frames", held_out,
                           f"networks on every subject but {calibration}, thresholds on those",
@@ -94,10 +95,10 @@ elif stage == "assemble":
         raise SystemExit("the anchor concepts differ from the repair network's; delete parts/anchor_concepts.safetensors")
     model = Refiner(None, None, None, None, concepts, None, parts["flaw_recognizer"], parts["flaw_repairer"],
                     parts["flaw_classifier"], noise_filter=parts["noise_filter"], pose_prior=parts.get("pose_prior"),
-                    amplitude_restorer=None, skeleton="cmu_mocap",  # see AMPLITUDE_NOTE
+                    amplitude_restorer=None, noise_residual=parts.get("noise_residual"), skeleton="cmu_mocap",  # see AMPLITUDE_NOTE
                     action_names=CMU_ACTIONS, manifest=manifest)
     folder = Path(sys.argv[4]) if len(sys.argv) > 4 else out / "refiner"
-    model.save(folder, half=True)
+    model.save(folder, half=True, int8=("noise_residual",))
     print(Refiner.load(folder).manifest["learned"])
 else:
     raise SystemExit(f"unknown stage {stage!r}")

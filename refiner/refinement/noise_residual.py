@@ -19,7 +19,9 @@ denoised after the rigid-skeleton step, uncapped; ``runs/s37/nf_mlp.py``, git-ig
 38.9 % of the added error; with a residual of 512 hidden units trained on 3 / 10 noisy copies of the training
 subjects 1-8: 41.2 / 42.7 %; 256 units, 20 copies: 42.6 %; a window of 6 frames instead of 3: 42.8 %; the frame's
 window read in its body frame (:func:`~refiner.refinement.pose_prior.body_frame`) instead of turned crops:
-40.7 %; a *linear* residual trained alike: 38.9 % (nothing: the gain is the network's nonlinearity).
+40.7 %; a *linear* residual trained alike: 38.9 % (nothing: the gain is the network's nonlinearity). In the refiner
+(``motion-refiner bench flaws``, train-split weights, subjects 11-12, severity 2): transition jitter 37.6 -> 41.9 %,
+mean of the 7 families 37.75 -> 38.36 %, every other family and the clean clips as before.
 """
 from __future__ import annotations
 
@@ -86,7 +88,7 @@ class NoiseResidual(NetworkComponent):
         Noisy copies are put on rigid bones first (the clean frames outside the window kept as a core), as the
         refiner's first step shows clips to its noise steps.
     schedule : TrainSchedule
-        10 epochs of batches of 512 frames at 1e-3 (about 4 minutes on one CPU core for HumanAct12's subjects 1-8).
+        10 epochs of batches of 512 frames at 1e-3 (about 2 minutes on one CPU core for HumanAct12's subjects 1-8).
     random_state : int or None, default=0
 
     Attributes

@@ -248,8 +248,8 @@ class Refiner:
     def load(cls, folder: str | os.PathLike, *, device: str = "cpu", verify: bool = True, **kwargs) -> "Refiner":
         """Load a saved refiner, checking its manifest's schema and sha256 and every file's sha256.
 
-        ``verify=False`` skips the hashes (not the schema). Raises ``ValueError`` naming the file and
-        the problem (see :func:`refiner.core.manifest.read_refiner_manifest`).
+        ``verify=False`` skips the hashes (not the schema); a part named in ``kwargs`` (``noise_residual=None``) replaces the
+        loaded one. Raises ``ValueError`` naming the file and the problem (see :func:`refiner.core.manifest.read_refiner_manifest`).
         """
         resolve_device(device)  # an unavailable device is refused before anything is read
         manifest, paths = read_refiner_manifest(folder, _PARTS, verify=verify)
@@ -257,8 +257,8 @@ class Refiner:
         for name, path in paths.items():
             part_cls = _PARTS[name]
             parts[name] = part_cls.load(path) if name in _NO_DEVICE else part_cls.load(path, device=device)
-        return cls(**parts, skeleton=manifest["skeleton"], action_names=manifest["action_names"],
-                   manifest=manifest, **kwargs)
+        return cls(**{**parts, **kwargs}, skeleton=manifest["skeleton"], action_names=manifest["action_names"],
+                   manifest=manifest)
 
     @classmethod
     def pretrained(cls, skeleton: str = "humanact12", *, split: str = "all", device: str = "cpu",

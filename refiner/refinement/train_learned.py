@@ -97,7 +97,7 @@ OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller", "timing_estimator", "noise
 #: The timing estimator's settings (about 20 minutes on one CPU core) and its tiny test version.
 TIMING_CONFIGS = {"default": dict(schedule=dict()),
                   "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
-#: The noise residual's settings (behind the noise filter of the same run, else of ``base``: about 4 minutes on one CPU
+#: The noise residual's settings (behind the noise filter of the same run, else of ``base``: about 2 minutes on one CPU
 #: core) and its tiny test version.
 NOISE_RESIDUAL_CONFIGS = {"default": dict(schedule=dict()),
                           "tiny": dict(hidden=8, copies=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
