@@ -103,17 +103,19 @@ def bone_variation(joints: np.ndarray, skeleton: str) -> float | np.ndarray:
     return float(variation[0]) if x.ndim == 3 else variation
 
 
-def rough_bones(joints: np.ndarray, skeleton: str, *, natural: bool = False) -> np.ndarray:
+def rough_bones(joints: np.ndarray, skeleton: str, *, natural: bool = False, bones: np.ndarray | None = None) -> np.ndarray:
     """``(T,)``: how roughly each frame's bones of ``joints (T, J, 3)`` metres leave the clip's :func:`rigid_core`:
     the mean over bones of how far each bone's relative deviation from the core's median length lies from the mean
     of its deviations in the frames before and after (half the second difference in time; 0.02: 2 %). Noise on the joints stretches and shrinks bones at random, frame by frame; a pose blended
     toward another, a re-timing's interpolation or a slow drift changes them smoothly (near 0). 0 on the core, at
     the clip's ends and throughout a clip with no core (nothing to deviate from), unless ``natural``: then a clip
     with no core deviates from its own median lengths (data whose bones vary, as CMU's processed joints: their
-    clean frames' roughness stays under 0.5 %)."""
+    clean frames' roughness stays under 0.5 %). ``bones``: boolean mask ``(J - 1,)`` of the bones judged (default all;
+    a layout's bones that span a bending chain vary in real motion)."""
     x = np.asarray(joints, np.float64)
     out = np.zeros(len(x))
     lengths = bone_lengths(x, skeleton)
+    lengths = lengths if bones is None else lengths[:, np.asarray(bones, bool)]
     core = rigid_core(lengths, poses=x) if len(x) >= 3 else None
     if core is None and not (natural and len(x) >= 3):
         return out

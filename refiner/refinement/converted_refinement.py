@@ -8,7 +8,9 @@ conversion has to estimate (on ``uestc``: the nose, heels and head top from SMPL
 in, spine, collars, feet, hands and head from the 18) affect the result only through the change.
 The action is unknown unless given as one of HumanAct12's action names (``uestc``'s 40 labels are not
 HumanAct12's 12): the recognition network's "unknown" entry handles it, and the flaw classifier is
-action-agnostic.
+action-agnostic. Noise that stretches and shrinks bones frame by frame is judged in the clip's own layout
+(converted, the clip is on rigid bones and the base cannot see it): ``bench skeletons`` uestc / humanml3d jitter
+23.2 / 36.1 -> 27.7 / 43.5 % of the added error removed.
 """
 from __future__ import annotations
 
@@ -19,10 +21,13 @@ import numpy as np
 from refiner.core.motion import Motion
 from refiner.core.output_kind import like_input
 from refiner.core.skeleton_conversion import convert, estimated_joints
+from refiner.core.rigid import rough_bones
 from refiner.core.skeletons import BoneProportions, get_skeleton, rigid_skeleton
 from refiner.core.validation import check_joints
 from refiner.refinement.inputs import MIN_FRAMES, check_metres_each, thread_limits
+from refiner.refinement.noise_filter import denoised_noise_runs
 from refiner.refinement.pose_prior import drifting_skeleton, prior_posed
+from refiner.refinement import rigid_step
 from refiner.refinement.texture_filter import filtered_texture
 
 __all__ = ["ConvertedRefiner", "FLEXIBLE_BONES", "converts_with_humanact12"]
@@ -141,6 +146,7 @@ class ConvertedRefiner:
         else:
             one, report = base.refine(inner[0], action=known[0], mode=mode, return_report=True)
             refined, reports = one[None], [report]
+        refined = self._noisy_bones_denoised(clips, rigid, inner, refined, reports, mode)
         # the pose prior's drift gate reads this clip's own bones (the base's rigid step is off: tolerance inf)
         drifting = (drifting_skeleton(clips, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones) if long_enough
                     else np.zeros(len(clips), bool))
@@ -173,6 +179,21 @@ class ConvertedRefiner:
         if return_report:
             return result, (reports if batched else reports[0])
         return result
+
+
+    def _noisy_bones_denoised(self, clips, rigid, inner, refined, reports, mode):
+        """``refined (B, T, J_R, 3)`` with the frames whose own-layout bones leave the clip's rigid core roughly
+        (:func:`~refiner.core.rigid.rough_bones` over ``NOISY_BONES``: clips with a core only, bending chains left out)
+        denoised as the base's noise runs, where no step of the base changed them: converted to the base's layout a
+        clip is put on rigid bones and has no core, so the base cannot see them."""
+        rough = np.zeros(clips.shape[:2])
+        for b, ((joints, variation), clip) in enumerate(zip(rigid, clips)):
+            if rigid_step.NOISY_BONES is not None and variation > self.rigid_tolerance and (joints == clip).all(axis=(1, 2)).any():
+                rough[b] = rough_bones(clip, self.skeleton, bones=self.rigid_bones) > rigid_step.NOISY_BONES
+        if not rough.any() or getattr(self.base, "noise_filter", None) is None or self.base.denoising != "filter":
+            return refined
+        changed = (refined != inner).any((2, 3))
+        return denoised_noise_runs(self.base, refined, reports, rough, changed, mode or self.base.mode)
 
 
 def converts_with_humanact12(skeleton: str) -> bool:
