@@ -13,12 +13,12 @@ freeze-then-rush and its mirror) with, in a share of crops, the non-timing train
 by a few frames) the frames are re-sampled at the inverse of ``s`` (kept non-decreasing), so the
 poses come back at their own moments; every other frame is returned exactly.
 
-Shipped in both HumanAct12 weight sets since this release (80 channels, 20,000 steps on crops turned about the
-vertical at random, weight matrices as int8 codes: 0.29 MB per set; ``motion-refiner train --learned --only
-timing_estimator --base FOLDER``, about 20 minutes on one CPU core, trains it, sets its threshold on the split's
-held-out subjects and adds it to the refiner in FOLDER). A refiner with it re-times first,
-``Refiner(retiming="estimated")``. Measured with the train-split weights, its threshold set on the clean clips of
-subjects 9-10 (1 % re-timed: 1.65 frames), severity 2, mean of the 7 families removed:
+Shipped in both HumanAct12 weight sets (80 channels on crops turned about the vertical at random, int8 weight matrices:
+0.29 MB per set; 40,000 steps since the noise residual's release, about 45 minutes on one CPU core: validation loss
+0.395 -> 0.353, threshold 1.65 -> 2.35 frames, bench 38.36 -> 38.94 %, frozen 72.0 -> 75.5, reversed 35.4 -> 36.6,
+time_warp 24.2 -> 23.5; ``motion-refiner train --learned --only timing_estimator --base FOLDER`` trains it, sets its
+threshold on the split's held-out subjects and adds it to the refiner in FOLDER). A refiner with it re-times first.
+Measured first (20,000 steps) with the train-split weights, threshold 1.65 frames (1 % of subjects 9-10's clean clips):
 
 - calibration subjects 9-10 (every 2nd clip): 30.7 -> 34.9 % (time_warp -0.4 -> 25.3, frozen 57.4 -> 69.5,
   jitter 34.3 -> 33.1, reversed 43.0 -> 40.0, foot_sliding 39.5 -> 36.9, wrong_anchor 4.4 -> 3.4), clean clips
@@ -250,8 +250,8 @@ class TimingEstimator(NetworkComponent):
     smooth : float, default=0.0
         Gaussian smoothing (frames) of the clip the network sees, in training and use (:func:`smoothed_in_time`);
         the re-timing re-samples the clip as given.
-    schedule : TrainSchedule, default=TrainSchedule(n_epochs=100, batch_size=48, learning_rate=1e-3, patience=100, steps_per_epoch=200)
-        20,000 steps: about 20 minutes on one CPU core.
+    schedule : TrainSchedule, default=TrainSchedule(n_epochs=200, batch_size=48, learning_rate=1e-3, patience=200, steps_per_epoch=200)
+        40,000 steps: about 45 minutes on one CPU core (20,000 before the noise residual's release).
     random_state : int or None, default=0
 
     Attributes
@@ -267,7 +267,7 @@ class TimingEstimator(NetworkComponent):
 
     def __init__(self, *, hidden: int = 80, window: int = 64, retimed: float = 0.75, negatives: float = 0.4,
                  widen: int = 3, turn: bool = True, smooth: float = 0.0,
-                 schedule: TrainSchedule = TrainSchedule(n_epochs=100, batch_size=48, learning_rate=1e-3, patience=100,
+                 schedule: TrainSchedule = TrainSchedule(n_epochs=200, batch_size=48, learning_rate=1e-3, patience=200,
                                                          steps_per_epoch=200),
                  random_state: int | None = 0):
         self.hidden = hidden
