@@ -25,7 +25,7 @@ from scipy.interpolate import make_smoothing_spline
 from scipy.ndimage import gaussian_filter1d, label
 
 from refiner.concepts.transitions import arc_length_profile
-from refiner.core.contact import planted_slip
+from refiner.core.contact import glide_steps
 from refiner.core.skeletons import Skeleton
 
 __all__ = ["frame_speed", "speed_profile", "resample_path", "retime_path", "stall_window", "teleports", "GLITCH", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
@@ -207,22 +207,15 @@ def spline_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, context: int
 
 def planted_feet_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, min_shift: float = 0.05) -> np.ndarray:
     """The whole body over ``lo..hi-1`` moved back by the part of its planted feet's horizontal slip
-    (:func:`refiner.core.contact.planted_slip`) that the root shares, step by step: a body that
-    glides moves root and planted feet alike, while a wrong pose moves the feet against the root
-    (moving the body for that made wrong poses worse). Frames where no foot is planted keep the
+    that the root shares (:func:`refiner.core.contact.glide_steps`), step by step (moving the body for
+    the rest made wrong poses worse). Frames where no foot is planted keep the
     shift reached so far; the splice takes it back to the kept frames. A glide that never moves
     the body ``min_shift`` metres away is left alone (planted feet of real clips slip a little)."""
     a, b = _bounds(len(y), lo, hi)
     out = y.copy()
     if b - a < 2:
         return out
-    slip = planted_slip(y, skeleton)[a:b]  # (b - a, 3)
-    step = np.diff(y[a : b + 1, skeleton.root].astype(np.float64), axis=0)
-    up = skeleton.up_vector
-    step = step - (step @ up)[:, None] * up
-    s_norm, r_norm = np.linalg.norm(slip, axis=-1), np.linalg.norm(step, axis=-1)
-    cos = (slip * step).sum(-1) / np.maximum(s_norm * r_norm, 1e-12)
-    glide = slip / np.maximum(s_norm, 1e-12)[:, None] * (np.minimum(s_norm, r_norm) * np.clip(cos, 0.0, 1.0))[:, None]
+    glide = glide_steps(y, skeleton)[a:b]  # (b - a, 3)
     shift = np.concatenate([np.zeros((1, 3)), -np.cumsum(glide, 0)])
     if np.linalg.norm(shift, axis=-1).max() < min_shift:
         return out
