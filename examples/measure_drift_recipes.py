@@ -30,6 +30,7 @@ from scipy.ndimage import gaussian_filter1d
 from threadpoolctl import threadpool_limits
 
 import refiner.refinement.pose_prior as pose_prior
+from refiner.evaluation.recipes import removed_by_recipe
 from refiner.io.datasets import load_humanact12
 from refiner.refinement.pipeline import Refiner
 
@@ -72,18 +73,9 @@ def corrupted(x, rng, recipe):
     return x + noise / max(noise.std(), 1e-9) * 0.025
 
 
-removed = []
-for recipe in ("limb", "linear", "wander", "late"):
-    before, after, changed = [], [], 0
-    for i, m in enumerate(clips):
-        rng = np.random.default_rng(700 + i)
-        x = m.joints.astype(np.float64)
-        bad = corrupted(x, rng, recipe).astype(np.float32)
-        out, report = model.refine(bad, action=m.action, return_report=True)
-        before.append(np.linalg.norm(bad - x, axis=-1).mean())
-        after.append(np.linalg.norm(out - x, axis=-1).mean())
-        changed += any(c.get("repair") == "pose_prior" for c in report.changes)
-    removed.append(100 * (1 - np.mean(after) / np.mean(before)))
-    print(f"{recipe:8s} {100 * np.mean(before):.3f} -> {100 * np.mean(after):.3f} cm  removed {removed[-1]:+.1f} %  "
-          f"({changed} of {len(clips)} clips changed by the pose prior)")
-print(f"mean {np.mean(removed):+.1f} %")
+records = removed_by_recipe(model, clips, {r: (lambda x, rng, r=r: corrupted(x, rng, r)) for r in ("limb", "linear", "wander", "late")},
+                           seed=700, counted=lambda report: any(c.get("repair") == "pose_prior" for c in report.changes))
+for recipe, r in records.items():
+    print(f"{recipe:8s} {r['before_cm']:.3f} -> {r['after_cm']:.3f} cm  removed {r['removed_pct']:+.1f} %  "
+          f"({r['counted']} of {len(clips)} clips changed by the pose prior)")
+print(f"mean {np.mean([r['removed_pct'] for r in records.values()]):+.1f} %")

@@ -146,3 +146,28 @@ def test_bench_skeletons_quick(tmp_path):
         assert set(row["removed_pct"]) == {"frozen_transition", "foot_sliding"}
         assert row["mean_removed_pct"] == pytest.approx(sum(row["removed_pct"].values()) / 2)
         assert row["removed_pct"]["foot_sliding"] > 20.0  # the planted feet come back to the ground
+
+
+def test_removed_by_recipe_measures_the_share_removed():
+    """Outside-the-benchmark recipes: a refiner that returns the flaw removes 0 %, one that halves it 50 %."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from refiner.evaluation.recipes import removed_by_recipe
+
+    clean = [SimpleNamespace(joints=np.zeros((10, 24, 3), np.float32), action=3) for _ in range(3)]
+    seen = []
+
+    class Halving:
+        def refine(self, flawed, action=None, return_report=False):
+            seen.append(action)
+            return flawed * 0.5, SimpleNamespace(changes=[{"repair": "x"}])
+
+    records = removed_by_recipe(Halving(), clean, {"shift": lambda x, rng: x + rng.uniform(0.01, 0.02)}, seed=5,
+                                counted=lambda report: bool(report.changes))
+    r = records["shift"]
+    assert math.isclose(r["removed_pct"], 50.0, rel_tol=1e-5) and r["counted"] == 3 and 1.0 < r["before_cm"] < 3.5
+    assert seen == [3, 3, 3]
+    removed_by_recipe(Halving(), clean, {"same": lambda x, rng: x + 0.01}, seed=0, with_action=False)
+    assert seen[-3:] == [None] * 3

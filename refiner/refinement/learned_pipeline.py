@@ -19,7 +19,8 @@
    (:mod:`refiner.core.contact`), noise is filtered; root and pose repairs are kept only when the flaw classifier
    finds the result more real (:data:`VERIFY_TYPED`). Only the flagged runs are spliced in (displacement zero at the
    kept frames, smoothstep taper), and changed frames go back on the input's bone lengths. A run that contains a
-   recognised anchor is reported as an anchor refinement, the others as transition refinements. Last, the noise steps
+   recognised anchor is reported as an anchor refinement, the others as transition refinements. A body that glides
+   over its planted feet is moved back (:mod:`refiner.refinement.skating`). Last, the noise steps
    (:func:`filtered_noise`), the pose prior (:func:`prior_posed`), the texture filter
    (:func:`~refiner.refinement.texture_filter.filtered_texture`) and the kept frames of a rigid core's clip put on its lengths.
 """
@@ -35,6 +36,7 @@ from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
 from refiner.refinement.retrace import cut_retraces
+from refiner.refinement.skating import deskated
 from refiner.refinement.rigid_step import natural_bones_back, noisy_bones, rigid_at_last, rigid_first
 from refiner.refinement.noise_filter import filtered_noise
 from refiner.refinement.pose_prior import prior_posed
@@ -371,6 +373,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                 else:
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
+    out = deskated(refiner, out, reports, mode)  # a body gliding over its planted feet
     noise = None if clf_all is None else np.maximum(clf_all[..., 1 + _GROUP_NAMES.index("noise")],  # before any snap
                                                     noisy_bones(refiner, given, cored))  # bones too
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)

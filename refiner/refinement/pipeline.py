@@ -43,6 +43,7 @@ from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.report import RefinementReport
 from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.rigid_step import NATURAL_BONES_KEY
+from refiner.refinement.skating import skating_threshold
 from refiner.refinement.splicing import project_bone_lengths, splice
 from refiner.refinement.timing_estimation import TIMING_AGREEMENT, TimingEstimator
 from refiner.refinement.transition_refinement import TransitionRefiner
@@ -115,10 +116,11 @@ class Refiner:
     rigid_core : bool, default=True
         The flaw steps see a clip's rigid core and its frames whose bones only shorten as given; the last step puts the
         latter on the core's lengths (:func:`~refiner.core.rigid.rigid_skeleton`); False: all projected first (the previous release).
-    natural_bones : float, optional
-        A clip whose bones vary no more than this (std / mean) gets its given frames back where no step after the rigid
-        one changed them (:func:`~refiner.refinement.rigid_step.natural_bones_back`); default: the weights'
-        ``manifest["learned"]["natural_bone_variation"]`` (CMU's processed joints: 5.5 %), else 0 (off; mocap's are exact).
+    natural_bones, skating : float, optional
+        A clip whose bones vary no more than ``natural_bones`` (std / mean) gets its given frames back where no step after
+        the rigid one changed them (:func:`~refiner.refinement.rigid_step.natural_bones_back`); a body gliding ``skating``
+        metres over its planted feet in half a second is moved back (:mod:`refiner.refinement.skating`). Default: the
+        weights' ``manifest["learned"]`` ``natural_bone_variation`` (CMU: 5.5 %) and ``skating_threshold_m``, else 0 (off).
     quality, anchor_method, transition_method, anchor_noise
         Options of the concepts method, see :mod:`refiner.refinement.concepts_pipeline`: ``quality`` in
         {"pose", "encoder"}, ``anchor_method`` in {"posterior", "concept"}, ``transition_method`` in
@@ -145,10 +147,10 @@ class Refiner:
                  amplitude_restorer=None, pose_prior=None, texture_filter=None, noise_residual=None, *,
                  skeleton: str = "humanact12", action_names=(), mode: str = "full", method: str | None = None,
                  repair: str = "typed", detect: str = "classifier", min_run: int = 2, margin: int = 2,
-                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True, natural_bones: float | None = None, retiming: str | None = None,
-                 timing_agreement: float | None = TIMING_AGREEMENT,
-                 denoising: str | None = None, amplitude: str = "keep", posing: str = "prior", texture: str = "off",
-                 concept_snap: float = 0.0, misread_snap: float = 0.0,
+                 rigid_tolerance: float = 0.005, rigid_lengths: str | None = None, rigid_core: bool = True,
+                 natural_bones: float | None = None, skating: float | None = None, retiming: str | None = None,
+                 timing_agreement: float | None = TIMING_AGREEMENT, denoising: str | None = None, amplitude: str = "keep",
+                 posing: str = "prior", texture: str = "off", concept_snap: float = 0.0, misread_snap: float = 0.0,
                  change_penalty: float = 0.01, hysteresis: float = 0.5,
                  quality: str = "pose", anchor_method: str = "posterior", transition_method: str = "network",
                  anchor_noise: float = 0.02, blend: int = 4, threads: int | str | None = "auto", manifest: dict | None = None):
@@ -192,6 +194,7 @@ class Refiner:
         self.manifest = manifest or {}
         self.natural_bones = check_strength(self.manifest.get("learned", {}).get(NATURAL_BONES_KEY, 0.0) if natural_bones
                                             is None else natural_bones, "natural_bones", "a bone-length std / mean")
+        self.skating = skating_threshold(self.manifest, skating)
         calibration = self.manifest.get("calibration", {})
         if anchor_quality is not None and "anchor_threshold" in calibration:  # a copy: the given part stays as it is
             anchor_quality = copy.copy(anchor_quality)
@@ -229,8 +232,7 @@ class Refiner:
         Each step's thresholds go with it: a part's in its file, the re-timing step's in ``calibration``.
         """
         int8 = check_choices("int8", int8, [n for n in _PARTS if n not in _NO_DEVICE])
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
+        (folder := Path(folder)).mkdir(parents=True, exist_ok=True)
         files = {}
         for name in _PARTS:
             path = folder / f"{name}.safetensors"
@@ -255,8 +257,7 @@ class Refiner:
         manifest, paths = read_refiner_manifest(folder, _PARTS, verify=verify)
         parts = {name: None for name in _PARTS}
         for name, path in paths.items():
-            part_cls = _PARTS[name]
-            parts[name] = part_cls.load(path) if name in _NO_DEVICE else part_cls.load(path, device=device)
+            parts[name] = _PARTS[name].load(path) if name in _NO_DEVICE else _PARTS[name].load(path, device=device)
         return cls(**{**parts, **kwargs}, skeleton=manifest["skeleton"], action_names=manifest["action_names"],
                    manifest=manifest)
 
@@ -287,8 +288,7 @@ class Refiner:
         """Network parameters per part, and their ``total``."""
         counts = {name: getattr(self, name).n_parameters() for name in _PARTS
                   if name not in _NO_DEVICE and getattr(self, name) is not None}
-        counts["total"] = sum(counts.values())
-        return counts
+        return {**counts, "total": sum(counts.values())}
 
     # ------------------------------------------------------------------ refinement
 

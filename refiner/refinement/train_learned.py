@@ -16,6 +16,7 @@ import numpy as np
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.segmentation import segment
+from refiner.core.contact import SKATING_WINDOW
 from refiner.core.manifest import file_sha256, read_refiner_manifest, write_manifest
 from refiner.core.rigid import bone_variation
 from refiner.core.skeletons import BoneProportions, convert
@@ -30,6 +31,7 @@ from refiner.refinement.noise_residual import NoiseResidual
 from refiner.refinement.pipeline import _PARTS, _WEIGHTS, Refiner
 from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.rigid_step import NATURAL_BONES_KEY
+from refiner.refinement.skating import SKATING_KEY, calibrate_skating
 from refiner.refinement.texture_filter import TextureFilter
 from refiner.refinement.timing_estimation import TimingEstimator
 
@@ -275,7 +277,8 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
         return add_optional_part(parts[only], only, dataset, out, split=split, base=base)
     if only is not None:
         return None
-    natural = calibrate_learned(parts, dataset, split=split)[NATURAL_BONES_KEY]  # the parts keep their thresholds
+    thresholds = calibrate_learned(parts, dataset, split=split)  # the parts keep their own thresholds
+    kept = {k: thresholds[k] for k in (NATURAL_BONES_KEY, SKATING_KEY) if k in thresholds}
     base = _default_base(dataset, split) if base is None else base
     info = {}
     for name in LEARNED_PARTS + OPTIONAL_PARTS:
@@ -283,7 +286,7 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
         if log_path.is_file():
             info[name] = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"}
     return install_learned(base, parts, out=out, info={"split": split, **bone_proportion_records(dataset.split(split)),
-                                                        NATURAL_BONES_KEY: natural, **info})
+                                                        **kept, **info})
 
 
 def _default_base(dataset: MotionDataset, split: str) -> Path:
@@ -346,10 +349,12 @@ def bone_proportion_records(data: MotionDataset) -> dict:
 def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all", clip_rate: float = CLIP_RATE) -> dict:
     """Set both flaw thresholds on the clean clips of the split's held-out subjects (:func:`calibration_split`):
     each detector flags at most ``clip_rate`` of them; and the bone variation their clean clips reach (the refiner gives
-    a clip within it its own bones back, ``Refiner(natural_bones=)``). Returns the thresholds."""
+    a clip within it its own bones back, ``Refiner(natural_bones=)``); and, on every clip of the split, the skating step's
+    threshold (:func:`~refiner.refinement.skating.calibrate_skating`). Returns the thresholds."""
     data = dataset.split(split)
     held = np.flatnonzero(calibration_split(data.subjects))
     clips, actions = [data.motions[i].joints for i in held], data.actions[held]
+    long_clips = [m.joints for m in data.motions if len(m.joints) > 2 * SKATING_WINDOW]  # a rule: every clip serves
     return {"classifier_threshold": parts["flaw_classifier"].calibrate(clips, clip_rate=clip_rate),
             "flaw_threshold": parts["flaw_recognizer"].calibrate(clips, actions, clip_rate=clip_rate),
             "correction_threshold_m": parts["flaw_repairer"].calibrate(clips, actions, clip_rate=clip_rate),
@@ -365,4 +370,5 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
                 clips, actions, clip_rate=AMPLITUDE_CLIP_RATE))) if "amplitude_restorer" in parts else {}),
             NATURAL_BONES_KEY: min(1.0, max(bone_variation(data.motions[i].joints, data.motions[i].skeleton)
                                             for i in held)),
+            **({SKATING_KEY: calibrate_skating(long_clips, data.motions[0].skeleton)} if long_clips else {}),
             "clip_rate": clip_rate, "calibration_clips": int(len(held))}
