@@ -227,3 +227,27 @@ def test_windows_do_not_grow_over_a_jump_in_the_recording(monkeypatch):
     assert stall_window(still, 4, 8)[0] == 2  # grown over the stall, not over the jump (a = 1 re-times from frame 0)
     monkeypatch.setattr(repair_candidates, "GLITCH", np.inf)  # the release before: grown over the jump
     assert stall_window(y, 15, 20) == (15, 28) and stall_window(still, 4, 8)[0] == 1
+
+@pytest.mark.real_data
+def test_stall_retiming_spans_the_stop_and_its_rush_not_the_whole_run(walks, monkeypatch):
+    """A run widened 15 frames past a frozen transition holds motion that never stalled: re-timed with the stop and
+    its rush only, those frames stay as given, and the clip ends nearer the truth than with the whole run re-timed."""
+    import refiner.refinement.repair_candidates as rc
+
+    results = []
+    for i, m in enumerate(walks):
+        c = frozen_transition(m, 2, random_state=i)
+        lo, hi = _runs(c.mask)[0]
+        if hi + 15 > len(m.joints) - 1:
+            continue
+        stall = stall_retime_run(c.motion.joints, lo, hi + 15, SKEL)
+        changed = np.flatnonzero((stall != c.motion.joints).any((1, 2)))
+        if not changed.size:
+            continue
+        assert changed[-1] < hi + 14  # the frames after the rush are kept
+        monkeypatch.setattr(rc, "STALL_SPAN", "run")
+        whole = stall_retime_run(c.motion.joints, lo, hi + 15, SKEL)
+        monkeypatch.setattr(rc, "STALL_SPAN", "stall")
+        results.append((_err(stall, m.joints), _err(whole, m.joints)))
+    assert len(results) >= 3
+    assert np.mean([a for a, _ in results]) < np.mean([b for _, b in results])
