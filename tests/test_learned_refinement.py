@@ -44,7 +44,7 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert again.flaw_denoiser is not None and again.flaw_denoiser.skeleton_ == "humanact12"
     assert again.motion_infiller is not None and again.motion_infiller.n_joints_ == 24
     assert again.timing_estimator is not None and again.retiming == "estimated"
-    assert again.noise_filter is not None and again.denoising == "filter" and again.noise_filter.half_width == 1
+    assert again.noise_filter is not None and again.denoising == "runs" and again.noise_filter.half_width == 1
     assert again.manifest["learned"]["noise_threshold_m"] == pytest.approx(again.noise_filter.threshold_)
     assert again.noise_residual is not None and again.noise_residual.half_width_ == 1 and again.noise_residual.hidden == 8
     assert again.manifest["learned"]["noise_residual"]["fit_clips"] > 0

@@ -196,7 +196,7 @@ def test_clips_noisy_throughout_get_the_texture_threshold():
     from refiner.reference import load_reference_generator
     from refiner.refinement.noise_filter import filtered_noise
 
-    model = Refiner.pretrained("humanact12", split="train")
+    model = Refiner.pretrained("humanact12", split="train", denoising="filter")  # a generator's, GENERATOR_OPTIONS
     prior = model.pose_prior
     assert prior.texture_threshold_ > prior.threshold_
     clips = np.stack([m.joints for m in load_reference_generator("a2m").sample_motions(1, 6, random_state=3)])
@@ -207,7 +207,7 @@ def test_clips_noisy_throughout_get_the_texture_threshold():
     steps = [c for r in reports for c in r.changes if c.get("repair") == "pose_prior"]
     assert steps and all("noisy throughout" in c["reason"] and f"{100 * prior.texture_threshold_:.2f} cm" in c["reason"]
                          for c in steps)
-    kept = Refiner.pretrained("humanact12", split="train", posing="keep").refine(clips, action=[1] * len(clips))
+    kept = Refiner.pretrained("humanact12", split="train", denoising="filter", posing="keep").refine(clips, action=[1] * len(clips))
     assert not np.array_equal(out, kept)
     assert [r.noisy_throughout for r in reports] == noisy.tolist()
     # drifting too: the drift threshold, natively and through the uestc conversion alike

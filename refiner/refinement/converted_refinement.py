@@ -190,7 +190,7 @@ class ConvertedRefiner:
         for b, ((joints, variation), clip) in enumerate(zip(rigid, clips)):
             if rigid_step.NOISY_BONES is not None and variation > self.rigid_tolerance and (joints == clip).all(axis=(1, 2)).any():
                 rough[b] = rough_bones(clip, self.skeleton, bones=self.rigid_bones) > rigid_step.NOISY_BONES
-        if not rough.any() or getattr(self.base, "noise_filter", None) is None or self.base.denoising != "filter":
+        if not rough.any() or getattr(self.base, "noise_filter", None) is None or self.base.denoising not in ("filter", "runs"):
             return refined
         changed = (refined != inner).any((2, 3))
         return denoised_noise_runs(self.base, refined, reports, rough, changed, mode or self.base.mode)

@@ -23,7 +23,7 @@ RIGID_LENGTHS = ("proportions", "median")
 #: flagged as timing re-timed (``"flagged"``, and after the estimator); the stalls only (``"stalls"``).
 RETIMING = ("estimated", "flagged", "stalls")
 #: Noise: flagged runs, noise-group runs, clips noisy throughout (``"filter"``); no noise-group runs (``"throughout"``); flagged runs only.
-DENOISING = ("filter", "throughout", "flagged")
+DENOISING = ("runs", "filter", "throughout", "flagged")
 #: Clips that move too little for their action: scaled back (``"restore"``, for a generator's clips) or kept (``"keep"``).
 AMPLITUDE = ("restore", "keep")
 #: Poses off real motion: corrected by the pose prior (``"prior"``) or kept (``"keep"``).
@@ -38,8 +38,9 @@ TEXTURE = ("auto", "all", "off")
 #: given mocap: the amplitude step scaled a calm held-out clip of subjects 11-12 by 3.5, 3.1 cm); and every run the
 #: timing estimator finds re-timed, without the flaw classifier's agreement (600 samples of each reference generator,
 #: against 0.8: FID actor 4.069 -> 3.844, mdm 1.151 -> 1.139, actor-large 0.979 -> 0.973, a2m 3.033 -> 3.065, a2m-large
-#: 0.901 -> 0.903).
-GENERATOR_OPTIONS = {"texture": "all", "amplitude": "restore", "misread_snap": 1.0, "timing_agreement": None}
+#: 0.901 -> 0.903); and a clip noisy throughout denoised as a whole (``denoising="filter"``; ``refine()``'s ``"runs"``
+#: leaves that step out: it cost jittered mocap its runs' repair).
+GENERATOR_OPTIONS = {"texture": "all", "amplitude": "restore", "misread_snap": 1.0, "timing_agreement": None, "denoising": "filter"}
 #: Shortest clip refined; shorter ones pass through unchanged (reported).
 MIN_FRAMES = 8
 #: ``threads="auto"`` uses more than one thread from this many clips in a batch on (2-core CPU: a 60-frame clip took

@@ -264,7 +264,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it
     clips = estimated_retiming(refiner, clips, reports, mode)  # timing first
     use_rec, use_cor, use_clf, use_den = (n in refiner.detect.split("+") for n in ("recognizer", "correction", "classifier", "denoiser"))
-    clf_all = (refiner.flaw_classifier.predict_all(clips) if use_clf or refiner.repair == "typed" or (refiner.denoising == "filter"
+    clf_all = (refiner.flaw_classifier.predict_all(clips) if use_clf or refiner.repair == "typed" or (refiner.denoising in ("filter", "runs")
                and getattr(refiner, "flaw_classifier", None) is not None) else None)  # noise runs: filtered_noise
     cut = cut_retraces(refiner, clips, reports, mode, None if clf_all is None else clf_all[..., 0])
     if clf_all is not None and (again := np.flatnonzero((cut != clips).any(axis=(1, 2, 3)))).size:

@@ -101,9 +101,9 @@ class Refiner:
         flagged retraces cut (:mod:`refiner.refinement.retrace`) and flagged stalls re-timed; ``"stalls"``: stalls only.
     timing_agreement : float or None, default=0.8
         An estimated run is re-timed where the flaw classifier's timing group reaches it (None, a generator's: every run).
-    denoising : {"filter", "throughout", "flagged"}, optional
-        ``"filter"`` (default when there is a ``noise_filter``): runs the flaw classifier's noise group finds, then
-        clips noisy throughout, are denoised last; ``"throughout"``: the latter only; ``"flagged"``: neither.
+    denoising : {"runs", "filter", "throughout", "flagged"}, optional
+        ``"runs"`` (default with a ``noise_filter``): the runs the flaw classifier's noise group finds are denoised last; ``"filter"``
+        (a generator's, ``GENERATOR_OPTIONS``): those, then clips noisy throughout; ``"throughout"``: the latter; ``"flagged"``: neither.
     concept_snap : float in [0, 1], default=0
         The concept-snap option (:mod:`refiner.refinement.concept_snap`): a clip of a given action has its anchors moved
         this share of the way onto the action's nearest anchor concepts; fidelity traded for realism (off).
@@ -214,10 +214,10 @@ class Refiner:
         if timing_agreement is not None and (isinstance(timing_agreement, bool) or not 0 <= timing_agreement <= 1):
             raise ValueError(f"`timing_agreement` must be None or a probability in [0, 1]; got {timing_agreement!r}.")
         self.timing_agreement = timing_agreement
-        self.denoising = check_choice("denoising", denoising or ("flagged" if noise_filter is None else "filter"), DENOISING)
+        self.denoising = check_choice("denoising", denoising or ("flagged" if noise_filter is None else "runs"), DENOISING)
         for option, value, part, name in (("retiming", self.retiming, timing_estimator, "timing_estimator"),
                                           ("denoising", self.denoising, noise_filter, "noise_filter")):
-            if value in ("estimated", "filter", "throughout") and part is None:
+            if value in ("estimated", "runs", "filter", "throughout") and part is None:
                 raise ValueError(f"{option}={value!r} needs a `{name}`, which these weights lack; use 'flagged'.")
         if self.rigid_lengths == "proportions" and self.bone_proportions is None:
             raise ValueError("rigid_lengths='proportions' needs the bone proportions of the weights' manifest "

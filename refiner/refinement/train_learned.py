@@ -219,7 +219,7 @@ def install_learned(folder: str | Path, parts: dict, *, out: str | Path | None =
     refiner.pose_prior = parts.get("pose_prior")
     refiner.texture_filter = parts.get("texture_filter")
     refiner.noise_residual = parts.get("noise_residual")
-    refiner.denoising = "filter" if refiner.noise_filter is not None else "flagged"
+    refiner.denoising = "runs" if refiner.noise_filter is not None else "flagged"
     refiner.retiming = "estimated" if refiner.timing_estimator is not None else "flagged"
     refiner.manifest["learned"] = {**(info or {}), "flaw_threshold": float(parts["flaw_recognizer"].threshold_),
                                    "classifier_threshold": float(parts["flaw_classifier"].threshold_),
