@@ -82,14 +82,15 @@ def deskated(refiner, clips: np.ndarray, reports: list, mode: str) -> np.ndarray
             lo, hi = max(int(lo), 0), min(int(hi), len(y))
             new = splice(y, planted_feet_run(y, lo, hi, skel), lo, hi, blend=refiner.blend,
                          keep_start=lo > 0, keep_end=hi < len(y))
-            if np.array_equal(new, y) or (SMOOTHER_ROOT and _root_roughness(new, lo, hi, skel) > _root_roughness(y, lo, hi, skel)):
+            if np.array_equal(new, y) or (SMOOTHER_ROOT and _root_roughness(new, lo, hi, skel)
+                                          > _root_roughness(y, lo, hi, skel)):  # a wrong pose's slip, not a glide
                 continue
             if out is clips:
                 out = clips.copy()
             moved = 100 * float(np.linalg.norm(new[lo:hi] - y[lo:hi], axis=-1).mean())
             reports[b].changes.append({"start": lo, "stop": hi, "step": "transition", "repair": "planted_feet", "reason":
                                        f"the body glides up to {100 * glide[b][max(lo, 0):hi].max():.1f} cm over its planted "
-                                       f"feet in {SKATING_WINDOW} frames (real clips: under {100 * threshold:.1f} cm); "
+                                       f"feet in {SKATING_WINDOW} frames (99 % of the weights' clean clips stay under {100 * threshold:.1f} cm); "
                                        f"moved back by the glide (moved {moved:.1f} cm on average)"})
             reports[b].flagged_transitions.append([lo, hi])
             y = new
