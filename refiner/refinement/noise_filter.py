@@ -351,18 +351,21 @@ def filtered_noise(refiner, clips: np.ndarray, reports: list, noise_probability:
     (a generator's texture rather than a flawed run), the noisy frames denoised and put back on the clip's bone
     lengths; in the others, with the classifier's ``noise_probability`` and the frames the repairs changed
     (``repaired``), the noise runs it saw (:func:`denoised_noise_runs`, ``denoising="filter"`` only). With
-    ``denoising="runs"`` (``refine()``'s default) every clip gets the noise runs and none the first step: on mocap the
-    step cost jittered clips their runs' repair (calibration subjects 9-10, jitter 39.2 % without it, 36.6 % with it)
-    and touched 2.4 % of clean clips. Each change is written to the clip's report. Returns ``(clips, noisy
+    ``denoising="runs"`` (``refine()``'s default) every clip gets the noise runs and none the first step's denoising
+    (those clips are still found and reported): on mocap the step cost jittered clips their runs' repair (calibration
+    subjects 9-10, jitter 39.2 % without it, 36.6 % with it) and touched 2.4 % of clean clips. Each change is written to the clip's report. Returns ``(clips, noisy
     throughout (B,) bool)``."""
     noise_filter, denoising = getattr(refiner, "noise_filter", None), getattr(refiner, "denoising", "filter")
     none = np.zeros(len(clips), bool)
     if noise_filter is None or denoising not in ("filter", "throughout", "runs"):
         return clips, none
-    if denoising == "runs":
+    if denoising == "runs":  # found and reported (the texture filter's "auto", the pose prior's gate), not denoised
+        noisy = noise_filter.clip_noise_level(clips) > noise_filter.threshold_
+        for b in np.flatnonzero(noisy):
+            reports[b].noisy_throughout = True
         if noise_probability is None or repaired is None:
-            return clips, none
-        return denoised_noise_runs(refiner, clips, reports, noise_probability, repaired, mode), none
+            return clips, noisy
+        return denoised_noise_runs(refiner, clips, reports, noise_probability, repaired, mode), noisy
     denoised, levels = noise_filter.denoise_clips(clips)
     rows = np.flatnonzero(levels > noise_filter.threshold_)
     for b in rows:
