@@ -69,6 +69,26 @@ def test_a_blended_pose_is_rebuilt_outward_and_noise_is_projected(humanact12, rn
 
 
 @pytest.mark.real_data
+def test_smooth_noise_on_each_joint_is_projected_not_rebuilt(humanact12, rng, monkeypatch):
+    """Low-frequency noise deviates smoothly like a blend, but each joint on its own: no one profile in time carries
+    its bone deviations (``BLEND_PROFILE``), so it is projected; rebuilt outward, each joint's noise reached its
+    descendants."""
+    from scipy.ndimage import gaussian_filter1d
+
+    clip, edited = _blended(humanact12)
+    dev = lambda x: bone_lengths(x, "humanact12")[1:-1] / bone_lengths(clip[:1], "humanact12") - 1  # noqa: E731
+    assert rigid._one_profile(dev(edited)) > 0.9
+    noisy = clip.copy()
+    noisy[8:32] += 3 * gaussian_filter1d(rng.normal(0, 0.03, noisy[8:32].shape), 3, axis=0)
+    assert rigid._one_profile(dev(noisy)) < rigid.BLEND_PROFILE
+    err = lambda a: np.linalg.norm(a - clip, axis=-1).mean()  # noqa: E731
+    out = rigid_skeleton(noisy, "humanact12", 0.005, keep_core=True)[0]
+    monkeypatch.setattr(rigid, "BLEND_PROFILE", 0.0)  # the release before: rebuilt
+    rebuilt = rigid_skeleton(noisy, "humanact12", 0.005, keep_core=True)[0]
+    assert err(out) < err(noisy) < err(rebuilt), (err(out), err(noisy), err(rebuilt))
+
+
+@pytest.mark.real_data
 def test_refine_leaves_a_blended_clips_exact_frames_to_the_core_not_the_pose_prior(humanact12):
     """A clip with exact bones in some frames was edited in places: the pose prior's drift gate, which refits every
     frame, stays off (it moved the exact frames of the benchmark's wrong anchors), and the output is nearer the

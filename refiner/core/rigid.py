@@ -14,7 +14,7 @@ import numpy as np
 from refiner.core.skeletons import bone_lengths, get_skeleton, joint_bone_lengths, with_bone_lengths
 
 __all__ = ["rigid_skeleton", "rigid_core", "bone_variation", "BoneProportions", "robust_bone_lengths", "CORE_TOLERANCE", "CORE_SHARE",
-           "REBUILD_BONES", "BLEND_AUTOCORRELATION", "EXACT_TOLERANCE", "EXACT_FRAMES", "EXACT_SPREAD", "rough_bones"]
+           "REBUILD_BONES", "BLEND_AUTOCORRELATION", "BLEND_PROFILE", "EXACT_TOLERANCE", "EXACT_FRAMES", "EXACT_SPREAD", "rough_bones"]
 
 #: Frames whose bones all lie within this share of one another's lengths form a rigid core (mocap bones
 #: are exact to 1e-5; a frame blended 10 % toward another pose shortens its forearm by about 1 %).
@@ -48,6 +48,14 @@ REBUILD_BONES = 6
 #: off-core frame took wrong_anchor -0.7 -> +2.2 % but jitter 32.3 -> -1.4 % (noise carried down each limb),
 #: hence the gate.
 BLEND_AUTOCORRELATION = 0.8
+#: ... and one profile in time carries at least this share of those deviations (:func:`_one_profile`): a blend moves
+#: every bone with one weight, smooth noise on each joint (a generator's wobble) moves them independently. Shares
+#: (every 3rd clip, severity 2; 5 / 50 % quantiles): the benchmark's wrong anchors 0.66 / 0.88 on the calibration
+#: subjects 9-10, 0.66 / 0.93 on 11-12; 3 cm noise smoothed over 3 frames (``examples/measure_noise_recipes.py``'s
+#: ``low_freq``) 0.52 / 0.70 and 0.47 / 0.69. Rebuilt, that recipe came out 25.4 % *worse*; at 0.7 / 0.8: +10.0 /
+#: +21.3 % removed. It costs the blends it no longer rebuilds: calibration wrong_anchor 4.6 -> 3.4 / 2.6 %,
+#: bench 2.1 -> 1.1 % (mean of 7: 40.62 -> 40.47 %). 0: the release before.
+BLEND_PROFILE = 0.8
 #: A joint off the core alone (its bones, none in the frames around) for at most this many frames is a spike:
 #: put back between those frames (:func:`_unspiked`) before the frame is rebuilt or projected. 0: off.
 SPIKE_FRAMES = 3
@@ -182,6 +190,7 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
                 smooth = (dev[1:] * dev[:-1]).sum() >= BLEND_AUTOCORRELATION * max((dev * dev).sum(), 1e-18)
                 inside = np.arange(len(core)) > np.argmax(core)  # between core frames: an edit that comes back
                 inside &= np.arange(len(core)) < len(core) - 1 - np.argmax(core[::-1])
+                smooth = smooth and _one_profile(dev[inside & ~core]) >= BLEND_PROFILE
                 off = np.abs(dev) > CORE_TOLERANCE
                 rebuild[k] = ~keep[k] & ((off.sum(-1) <= REBUILD_BONES) | (smooth & inside))
                 if spikes and SPIKE_FRAMES:
@@ -197,6 +206,15 @@ def rigid_skeleton(joints: np.ndarray, skeleton: str, tolerance: float, *, itera
     if single:
         return (out[0] if todo[0] else joints), float(variation[0])
     return (out if todo.any() else joints), variation
+
+
+def _one_profile(dev: np.ndarray) -> float:
+    """Share of the energy of bone deviations ``dev (T, n_bones)`` that one profile in time carries (the first
+    singular value's): 1 where every bone moves with one blend weight."""
+    if not np.abs(dev).any():
+        return 1.0
+    s = np.linalg.svd(dev, compute_uv=False)
+    return float(s[0] ** 2 / (s ** 2).sum())
 
 
 def _unspiked(x: np.ndarray, off: np.ndarray, pairs: np.ndarray, deviation: np.ndarray) -> np.ndarray:
