@@ -7,8 +7,8 @@ from refiner.core.contact import planted_feet, planted_slip
 from refiner.evaluation.flaws import corrupt, foot_sliding, frozen_transition, transition_jitter
 from refiner.io.datasets import load_cmu_mocap
 from refiner.refinement.pipeline import splice
-from refiner.refinement.repair_candidates import (CANDIDATES, planted_feet_run, smooth_run, spline_run, stall_retime_run,
-                                                 stall_window)
+from refiner.refinement.repair_candidates import (CANDIDATES, grounded_run, planted_feet_run, smooth_run, spline_run,
+                                                 stall_retime_run, stall_window)
 from refiner.core.skeletons import get_skeleton
 
 SKEL = get_skeleton("humanact12")
@@ -63,6 +63,52 @@ def test_planted_feet_run_undoes_a_glide_and_leaves_clean_clips(walks):
         clean_moved.append(_err(planted_feet_run(m.joints, lo, hi, SKEL), m.joints))
     assert np.mean(after) < 0.5 * np.mean(before)  # more than half of the glide's error removed
     assert np.mean(clean_moved) < 0.1 * np.mean(before)
+
+
+@pytest.mark.real_data
+def test_grounded_run_brings_a_floating_body_down_and_leaves_a_wrong_pose(walks):
+    """A body raised 10 cm (root and feet alike) comes back down; feet lifted against a root that stays (a wrong pose),
+    a clean clip and a body raised under ``min_shift`` are left alone."""
+    up = SKEL.up_vector
+    before, after = [], []
+    for m in walks:
+        x = m.joints.astype(np.float64)
+        w = np.zeros(len(x))
+        w[20:40] = np.sin(np.linspace(0, np.pi, 22)[1:-1])
+        raised = x + 0.10 * w[:, None, None] * up
+        fixed = splice(raised, grounded_run(raised, 18, 42, SKEL), 18, 42, blend=4, keep_start=True, keep_end=True)
+        before.append(_err(raised, x))
+        after.append(_err(fixed, x))
+        np.testing.assert_array_equal(grounded_run(x, 18, 42, SKEL), x)  # the clean clip
+        slight = x + 0.03 * w[:, None, None] * up
+        np.testing.assert_array_equal(grounded_run(slight, 18, 42, SKEL), slight)
+        feet = x.copy()
+        feet[:, 1:] += 0.10 * w[:, None, None] * up  # every joint but the root: the root stays, so no body rises
+        np.testing.assert_array_equal(grounded_run(feet, 18, 42, SKEL), feet)
+    assert np.mean(after) < 0.2 * np.mean(before), (np.mean(after), np.mean(before))
+
+
+def test_typed_alternatives_go_to_the_classifier_and_need_a_verified_group(rng, monkeypatch):
+    from types import SimpleNamespace
+
+    import refiner.refinement.learned_pipeline as lp
+
+    assert "|" in lp.TYPED_REPAIRS["root"][0] and "root" in lp.VERIFY_TYPED
+    y = (np.cumsum(rng.normal(0, 0.01, (40, 24, 3)), 0) + rng.normal(0, 0.01, (40, 24, 3))).astype(np.float32)
+    smooth = smooth_run(y, 10, 20, SKEL)
+    groups = np.zeros((40, 4))
+    groups[:, list(lp.TYPED_REPAIRS).index("noise")] = 0.9
+    monkeypatch.setattr(lp, "NOISE_RATIO", 0.0)
+    monkeypatch.setattr(lp, "TYPED_REPAIRS", {**lp.TYPED_REPAIRS, "noise": ("root_infill|smooth", 0)})
+    refiner = SimpleNamespace(repair="typed", blend=4, change_penalty=0.0, flaw_classifier=_Judge(smooth, 1.0),
+                              skeleton="humanact12")
+    with pytest.raises(ValueError, match="alternatives need the group 'noise' verified"):
+        lp._repair_run(refiner, y, 10, 20, {}, groups, y, SKEL)
+    monkeypatch.setattr(lp, "VERIFY_TYPED", ("noise",))
+    name, _, out, note = lp._repair_run(refiner, y, 10, 20, {}, groups, y, SKEL)
+    assert name == "smooth" and "chosen among 3 candidates" in note  # the judge likes the smoothed clip best
+    refiner.flaw_classifier = _Judge(CANDIDATES["root_infill"](y, 10, 20, SKEL), 1.0)
+    assert lp._repair_run(refiner, y, 10, 20, {}, groups, y, SKEL)[0] == "root_infill"
 
 
 @pytest.mark.real_data

@@ -22,7 +22,8 @@
    recognised anchor is reported as an anchor refinement, the others as transition refinements. A body that glides
    over its planted feet is moved back (:mod:`refiner.refinement.skating`). Last, the noise steps
    (:func:`filtered_noise`), the pose prior (:func:`prior_posed`), the texture filter
-   (:func:`~refiner.refinement.texture_filter.filtered_texture`) and the kept frames of a rigid core's clip put on its lengths.
+   (:func:`~refiner.refinement.texture_filter.filtered_texture`), the repeats of dropped frames put back in time
+   (:mod:`refiner.refinement.repeated_frames`) and the kept frames of a rigid core's clip put on its lengths.
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from refiner.refinement.anchor_recognition import anchor_peaks
 from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.repair_candidates import CANDIDATES, stall_window
+from refiner.refinement.repeated_frames import unrepeated
 from refiner.refinement.retrace import cut_retraces
 from refiner.refinement.skating import deskated
 from refiner.refinement.rigid_step import natural_bones_back, noisy_bones, rigid_at_last, rigid_first
@@ -55,7 +57,8 @@ __all__ = ["flag_runs", "noise_ratio", "NOISE_RATIO", "refine_clips", "refine_ba
 REPAIRS = ("typed", "select", "given", "infill")
 _GROUP_NAMES = tuple(GROUPS)
 #: ``repair="typed"``: the repair for the flaw group the classifier sees most in a run, and how many frames its window
-#: is widened on each side; ``"a+b"`` applies ``a``, then ``b`` to its result (a network proposal can only come first).
+#: is widened on each side; ``"a+b"`` applies ``a``, then ``b`` to its result (a network proposal can only come first);
+#: ``"a|b"`` offers both to the flaw classifier, which keeps the more real (the group must be in :data:`VERIFY_TYPED`).
 #: Chosen by measurement (``examples/measure_typed_repairs.py``, which takes each variant below as
 #: JSON) on the calibration subjects 9-10 of the train split (every 2nd clip, the
 #: benchmark's five training families at severity 2 and clean clips; the two held-out families were
@@ -102,7 +105,12 @@ _GROUP_NAMES = tuple(GROUPS)
 #:   re-timing only where a rush follows the stop (``stall_retime_run(rush=1.5)``): every figure here unchanged (its
 #:   reason lies in the benchmark subjects: a time-warped clip ending at rest was re-timed over it, +4.7 cm; -1.1 -> -0.4 %).
 #: - noise -> the learned noise filter (:mod:`refiner.refinement.noise_filter`): jitter +22.7 -> +23.0 %; with its last step (clips noisy throughout) 22.3 %, **+18.3 %** in all (README).
-TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet", 0), "pose": ("planted_feet", 0),
+#: - root -> the network then planted feet, or the body put back on the ground (``grounded``): ``"a|b"`` gives the
+#:   classifier both to choose from (a verified group). The network's proposal never looked more real on a floating
+#:   body (``examples/measure_body_recipes.py``, subjects 11-12): raised 10 cm over 15-40 frames -0.2 -> +40.5 %,
+#:   sunk 5 cm +0.8 -> +16.0 %; calibration wrong_anchor 2.6 -> 2.1 %, the others within 0.1; bench wrong_anchor
+#:   1.07 -> 0.93 %, mean of 7 40.47 -> 40.46 %. ``grounded`` from the lowest foot alone: calibration wrong_anchor 1.3 %.
+TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet|grounded", 0), "pose": ("planted_feet", 0),
                  "noise": ("noise_filter", 0)}
 #: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
 #: the given frames (:func:`_select` with the one candidate): a body moved back over skating feet or
@@ -203,23 +211,27 @@ def _repair_run(refiner, y, lo, hi, proposals: dict, groups, original, skel):
         if group == "noise" and (ratio := noise_ratio(y, lo, hi)) < NOISE_RATIO:
             return "keep", (lo, hi), y, (f"looks like noise, but no noisier than the rest of the clip (jitter "
                                          f"{ratio:.2f} times the clip's median, under {NOISE_RATIO}); kept")
-        name = "+".join(p if p in proposals else STAND_INS.get(p, p) for p in name.split("+"))  # weights without it
         a, c = max(lo - widen, 0), min(hi + widen, len(y))
         if group == "timing" and STALL_WINDOW:
             a, c = stall_window(y, a, c)
-        proposal = y
-        for k, part in enumerate(name.split("+")):  # applied left to right
-            if part in proposals and k > 0:
-                raise ValueError(f"typed repair {name!r}: a network proposal ({part!r}) can only come first.")
-            proposal = proposals[part] if part in proposals else CANDIDATES[part](proposal, a, c, skel)
+        options = {}
+        for option in name.split("|"):  # alternatives: the flaw classifier chooses (the group is verified)
+            option = "+".join(p if p in proposals else STAND_INS.get(p, p) for p in option.split("+"))  # weights without it
+            proposal = y
+            for k, part in enumerate(option.split("+")):  # applied left to right
+                if part in proposals and k > 0:
+                    raise ValueError(f"typed repair {option!r}: a network proposal ({part!r}) can only come first.")
+                proposal = proposals[part] if part in proposals else CANDIDATES[part](proposal, a, c, skel)
+            options[option + (f" (widened by {widen})" if widen else "")] = spliced(proposal, a, c)
         note = f"; looks like a {group} flaw (group probability {share.max():.2f})"
-        name = name + (f" (widened by {widen})" if widen else "")
-        new = spliced(proposal, a, c)
+        if len(options) > 1 and group not in VERIFY_TYPED:
+            raise ValueError(f"typed repair {name!r}: alternatives need the group {group!r} verified (VERIFY_TYPED).")
+        name, new = next(iter(options.items()))
         if group in VERIFY_TYPED:
-            chosen, why = _select(refiner, y, {name: new}, a, c)
+            chosen, why = _select(refiner, y, options, a, c)
             if chosen == "keep":
-                return "keep", (a, c), y, f"the {name} repair did not look more real than the given frames; kept"
-            note += why
+                return "keep", (a, c), y, f"the {' or '.join(options)} repair did not look more real than the given frames; kept"
+            name, new, note = chosen, options[chosen], note + why
         return name, (a, c), new, note
     if refiner.repair != "select":
         name = next(iter(proposals))
@@ -378,5 +390,6 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                                                     noisy_bones(refiner, given, cored))  # bones too
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)
     out = filtered_texture(refiner, prior_posed(refiner, out, reports, drifting, noisy), reports, noisy)
+    out = unrepeated(refiner, out, reports, mode)  # last: re-timing steps read its in-between frames as mistimed
     return natural_bones_back(refiner, rigid_at_last(refiner, out, reports, cored), given, rigid, reports)
 

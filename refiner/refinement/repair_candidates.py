@@ -25,7 +25,7 @@ from scipy.interpolate import make_smoothing_spline
 from scipy.ndimage import gaussian_filter1d, label
 
 from refiner.concepts.transitions import arc_length_profile
-from refiner.core.contact import glide_steps
+from refiner.core.contact import contact_joints, glide_steps, heights
 from refiner.core.skeletons import Skeleton
 
 __all__ = ["frame_speed", "speed_profile", "resample_path", "retime_path", "stall_window", "teleports", "GLITCH", "retime_run", "forward_retime_run", "smooth_run", "spline_run", "root_infill_run", "planted_feet_run",
@@ -247,6 +247,34 @@ def planted_feet_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, min_sh
     return out
 
 
+def grounded_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton, min_shift: float = 0.05) -> np.ndarray:
+    """The whole body over ``lo..hi-1`` moved along the up axis by the part of its lowest ground-contact joint's rise
+    (or fall) that the root shares: a floating or sinking body carries root and feet alike, while a wrong pose or a
+    squat moves the feet against the root. Both are measured from their linear course between the kept frames (at a
+    clip's edge, from the one kept frame's level, and only where the body is back at that level by the edge: a
+    held-out clip that climbs a step and stays up, its run reaching the clip's end, was pulled down 12 cm over 77
+    frames). A body never moved ``min_shift`` metres is left alone (a real clip's feet and root rise together a
+    little)."""
+    a, b = _bounds(len(y), lo, hi)
+    out = y.copy()
+    if b - a < 2 or (lo <= 0 and hi >= len(y)):  # no kept frame: no level to come back to
+        return out
+    h = heights(y, skeleton)  # (T, J)
+    t = (np.arange(a, b + 1) - a) / (b - a)
+
+    def rise(v):  # (b - a + 1,): v over its course between the kept frames
+        course = np.full(len(t), v[b]) if lo <= 0 else np.full(len(t), v[a]) if hi >= len(y) else (1 - t) * v[a] + t * v[b]
+        return v[a : b + 1] - course
+
+    dh, dr = rise(h[:, list(contact_joints(skeleton))].min(-1)), rise(h[:, skeleton.root])
+    shared = np.where(dh * dr > 0, np.sign(dh) * np.minimum(np.abs(dh), np.abs(dr)), 0.0)
+    edge = 0 if lo <= 0 else -1 if hi >= len(y) else None
+    if np.abs(shared).max() < min_shift or (edge is not None and abs(shared[edge]) >= min_shift):
+        return out
+    out[a : b + 1] = (y[a : b + 1].astype(np.float64) - shared[:, None, None] * skeleton.up_vector).astype(y.dtype)
+    return out
+
+
 def root_infill_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton) -> np.ndarray:
     """Root path over ``lo..hi-1`` linearly in-filled between the kept frames; each frame's pose kept."""
     root = skeleton.root
@@ -262,4 +290,5 @@ def root_infill_run(y: np.ndarray, lo: int, hi: int, skeleton: Skeleton) -> np.n
 
 #: Hand-written candidates by name (the network's proposals join them in the pipeline).
 CANDIDATES = {"retime": retime_run, "stall_retime": stall_retime_run, "forward_retime": forward_retime_run, "smooth": smooth_run,
-              "spline": spline_run, "root_infill": root_infill_run, "planted_feet": planted_feet_run}
+              "spline": spline_run, "root_infill": root_infill_run, "planted_feet": planted_feet_run,
+              "grounded": grounded_run}

@@ -101,6 +101,7 @@ REPAIR_WORDS = {
     "root_infill": "root path in-filled, poses kept",
     "spline": "smoothed in time by a smoothing spline fitted to it (smoothness by cross-validation)",
     "planted_feet": "whole body moved back by the slip of the feet planted on the ground",
+    "grounded": "whole body moved back down (or up) by the rise (or fall) its feet and root share",
 }
 
 
