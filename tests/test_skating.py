@@ -4,7 +4,8 @@ import pytest
 from conftest import shared_data_dir
 
 import refiner.refinement.skating as skating_step
-from refiner.core.contact import PLANTED_SPEED, SKATING_WINDOW, foot_joints, glide_steps, planted_feet, skating
+from refiner.core.contact import (PLANTED_SPEED, SKATING_WINDOW, contact_joints, foot_joints, glide_steps, heights,
+                                  on_ground_as, planted_feet, skating)
 from refiner.core.skeletons import get_skeleton
 from refiner.evaluation.flaws import corrupt
 from refiner.io.datasets import load_cmu_mocap
@@ -126,3 +127,15 @@ def test_a_correction_that_roughens_the_root_is_refused(cmu_test, monkeypatch):
     assert max(harmed) > 0.3 and sum(bool(r.changes) for r in reports) >= 3  # unchecked, it moves walks and harms
     assert all(_err(c, t) <= _err(f, t) + 0.05 for c, f, t in zip(checked, flawed, truth))
     assert deskated(Stub(), flawed, [RefinementReport(mode="anchor", n_frames=120)] * len(walks), "anchor") is flawed
+
+
+def test_on_ground_as_keeps_each_frames_lowest_foot_where_it_was(rng):
+    like = rng.normal(0, 0.3, (2, 30, 24, 3))
+    edited = like + rng.normal(0, 0.05, like.shape)  # a pose edited about the root: feet off their ground
+    out = on_ground_as(edited, like, "humanact12")
+    low = lambda a: heights(a[..., list(contact_joints("humanact12")), :], "humanact12").min(-1)  # noqa: E731
+    np.testing.assert_allclose(low(out), low(like), atol=1e-9)
+    moved = out - edited  # only along the up axis, one shift per frame
+    np.testing.assert_allclose(moved - (moved @ SKEL.up_vector)[..., None] * SKEL.up_vector, 0, atol=1e-12)
+    assert np.ptp(moved, axis=-2).max() < 1e-12
+    assert out.dtype == edited.dtype and np.array_equal(on_ground_as(like, like, "humanact12"), like)

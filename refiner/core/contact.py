@@ -14,7 +14,7 @@ from scipy.ndimage import minimum_filter1d, uniform_filter1d
 from refiner.core.motion import Motion
 from refiner.core.skeletons import Skeleton, get_skeleton
 
-__all__ = ["heights", "contact_joints", "foot_joints", "planted_feet", "planted_slip", "glide_steps", "skating", "horizontal", "PLANTED_HEIGHT",
+__all__ = ["heights", "contact_joints", "foot_joints", "planted_feet", "planted_slip", "glide_steps", "skating", "horizontal", "on_ground_as", "PLANTED_HEIGHT",
            "PLANTED_WINDOW", "PLANTED_SPEED", "SKATING_WINDOW"]
 
 _CONTACT_WORDS = ("ankle", "foot", "toe", "heel")
@@ -130,6 +130,16 @@ def skating(joints: np.ndarray, skeleton: str | Skeleton, window: int = SKATING_
     each step (the length of the summed :func:`glide_steps`). Real clips: under 9-11 cm in 99 % of them."""
     g = glide_steps(joints, skeleton)
     return np.linalg.norm(uniform_filter1d(g, int(window), axis=-2, mode="constant") * int(window), axis=-1)
+
+
+def on_ground_as(joints: np.ndarray, like: np.ndarray, skeleton: str | Skeleton) -> np.ndarray:
+    """``joints (..., T, J, 3)`` metres moved along the up axis, frame by frame, so that each frame's lowest
+    ground-contact joint (:func:`contact_joints`) is as high as in ``like`` (same shape): a pose edited about the
+    root (its motion scaled, say) keeps the feet where they met the ground, neither lifted nor pushed into it."""
+    skel = get_skeleton(skeleton)
+    feet = list(contact_joints(skel))
+    lift = heights(np.asarray(joints)[..., feet, :], skel).min(-1) - heights(np.asarray(like)[..., feet, :], skel).min(-1)
+    return (joints - lift[..., None, None] * skel.up_vector).astype(np.asarray(joints).dtype)
 
 
 def horizontal(v: np.ndarray, skeleton: str | Skeleton) -> np.ndarray:

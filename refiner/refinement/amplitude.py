@@ -21,6 +21,7 @@ import os
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from refiner.core.contact import on_ground_as
 from refiner.core.serialization import check_metadata, load_state, pack_metadata, save_state
 from refiner.core.skeletons import bone_lengths, get_skeleton
 from refiner.core.validation import check_is_fitted, check_random_state
@@ -197,7 +198,12 @@ class AmplitudeRestorer(BaseEstimator):
 
 def restored_amplitude(refiner, clips: np.ndarray, actions: list, reports: list) -> np.ndarray:
     """The refiner's amplitude step: ``clips (B, T, J, 3)`` that move too little for their action scaled back
-    and put on their bone lengths, each change written to its clip's report. A clip whose action is not
+    and put on their bone lengths, each frame's feet kept on the ground where they were
+    (:func:`~refiner.core.contact.on_ground_as`), each change written to its clip's report. Scaled about the mean
+    pose with the root path kept, the feet rose off the ground (600 samples per reference generator, floating above
+    each clip's lowest point: ``mdm`` generated 2.10 cm, refined 3.12, this step off 2.70, real clips 2.15); kept on
+    the ground, FID (5 replications) ``actor`` 4.100 -> 3.737, ``mdm`` 1.150 -> 1.135, ``actor-large`` 1.021 -> 1.013,
+    ``a2m`` and ``a2m-large`` (not damped) unchanged. A clip whose action is not
     given is left alone: against every action's spreads at once, calm real clips read as damped (a tenth
     of the benchmark's clean clips, and every HumanAct12 clip against the CMU weights)."""
     restorer = getattr(refiner, "amplitude_restorer", None)
@@ -214,7 +220,8 @@ def restored_amplitude(refiner, clips: np.ndarray, actions: list, reports: list)
         if s == 1.0:
             continue
         scaled = restorer._scaled(clips[b], s)
-        out[b] = project_bone_lengths(scaled, reference_lengths(clips[b], refiner.skeleton), every, refiner.skeleton)
+        out[b] = on_ground_as(project_bone_lengths(scaled, reference_lengths(clips[b], refiner.skeleton), every,
+                                                  refiner.skeleton), clips[b], refiner.skeleton)
         moved = 100 * float(np.linalg.norm(out[b] - clips[b], axis=-1).mean())
         report.changes.append({"start": 0, "stop": clips.shape[1], "step": "amplitude", "repair": "amplitude_restore",
                                "reason": f"the joints spread {k:.2f} times as far as real clips of its action "
