@@ -60,6 +60,7 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
     assert [c["step"] for c in report.changes].count("texture") == 1  # every clip, as a generator's
     assert np.isfinite(again.timing_estimator.threshold_)
     assert again.manifest["learned"]["timing_threshold_frames"] == pytest.approx(again.timing_estimator.threshold_)
+    assert np.isfinite(again.manifest["learned"]["timing_agreed_threshold_frames"])  # with the classifier's agreement
     flagged = Refiner.load(out, retiming="flagged")
     flagged.timing_estimator.threshold_ = 0.0  # every frame passes: the estimated step would re-time all of them
     clip = humanact12[10].joints[:50]
@@ -101,6 +102,7 @@ def test_an_optional_part_is_added_to_a_finished_refiner_leaving_its_files_alone
                                   base=SHIPPED_TRAIN, only="timing_estimator")
     assert added.retiming == "estimated" and np.isfinite(added.timing_estimator.threshold_)  # calibrated there
     assert added.manifest["learned"]["timing_threshold_frames"] == pytest.approx(added.timing_estimator.threshold_)
+    assert np.isfinite(added.manifest["learned"]["timing_agreed_threshold_frames"])
     assert added.manifest["learned"]["timing_estimator"]["split"] == "all"  # the part's training log
     for path in SHIPPED_TRAIN.glob("*.safetensors"):
         if path.stem != "timing_estimator":  # the shipped one, replaced

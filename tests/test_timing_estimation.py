@@ -52,6 +52,7 @@ def test_estimator_learns_where_frames_belong(humanact12, one_torch_thread, tmp_
     # better than "nothing is re-timed" (0.95 after these 400 steps; the shipped one, 8,000 steps: see the README)
     assert np.abs(pred - truth).mean() < 0.97 * np.abs(truth).mean()
     assert est.calibrate([m.joints for m in humanact12.motions[1100:1190:9]], clip_rate=0.1) > 0
+    assert est.agreed_threshold_ >= est.threshold_  # AGREED_CLIP_RATE (2.5 %) of the clips, not 10 %: no lower
     path = tmp_path / "timing.safetensors"
     est.save(path)
     np.testing.assert_allclose(TimingEstimator.load(path).offsets(flawed), pred, atol=1e-5)
@@ -158,8 +159,9 @@ def test_a_run_the_flaw_classifier_does_not_read_as_timing_is_not_retimed(humana
         out, report = Refiner.pretrained("humanact12", split="train", **options).refine(clip, return_report=True)
         return out, [c for c in report.changes if c.get("repair") == "estimated_retime"]
 
-    out, runs = retimed()
-    assert runs == [] and np.array_equal(out.joints, clip.joints)
+    out, runs = retimed()  # (frames 75-81 pass the lower threshold the agreement allows, and the classifier agrees)
+    assert not any(r["start"] <= 51 and r["stop"] >= 69 for r in runs)
+    np.testing.assert_array_equal(out.joints[:70], clip.joints[:70])
     for options in ({"timing_agreement": None}, {**GENERATOR_OPTIONS, "amplitude": "keep", "texture": "off"}):
         out, runs = retimed(**options)
         assert len(runs) == 1 and runs[0]["start"] <= 51 and runs[0]["stop"] >= 69
@@ -167,3 +169,25 @@ def test_a_run_the_flaw_classifier_does_not_read_as_timing_is_not_retimed(humana
     for bad in (1.5, -0.1, True):
         with pytest.raises(ValueError, match="timing_agreement"):
             Refiner.pretrained("humanact12", split="train", timing_agreement=bad)
+
+
+def test_with_the_classifiers_agreement_runs_pass_at_the_agreed_threshold(humanact12):
+    """With the classifier's agreement, runs are re-timed past the manifest's lower threshold (2.5 % of clean clips, not
+    1 %): a held-out time warp whose offsets peak between the two is re-timed there and not without the agreement."""
+    from refiner.evaluation.flaws import time_warp
+    from refiner.refinement.pipeline import Refiner
+    from refiner.refinement.timing_estimation import AGREED_KEY
+
+    model = Refiner.pretrained("humanact12", split="train")
+    agreed, alone = model.manifest["learned"][AGREED_KEY], model.timing_estimator.threshold_
+    assert 0 < agreed < alone
+    clip = [c for c in humanact12.split("test").motions if c.n_frames >= 60][58]
+    bad = time_warp(clip, 2, random_state=58).motion
+    assert agreed < np.abs(model.timing_estimator.retiming_offsets(bad.joints[None])[0]).max() < alone
+
+    def runs(**options):
+        _, report = Refiner.pretrained("humanact12", split="train", **options).refine(bad, return_report=True)
+        return [c for c in report.changes if c.get("repair") == "estimated_retime"]
+
+    assert len(runs()) == 1 and f"(threshold {agreed:.1f})" in runs()[0]["reason"]
+    assert runs(timing_agreement=None) == []

@@ -201,8 +201,8 @@ def restored_amplitude(refiner, clips: np.ndarray, actions: list, reports: list)
     and put on their bone lengths, each frame's feet kept on the ground where they were
     (:func:`~refiner.core.contact.on_ground_as`), each change written to its clip's report. Scaled about the mean
     pose with the root path kept, the feet rose off the ground (600 samples per reference generator, floating above
-    each clip's lowest point: ``mdm`` generated 2.10 cm, refined 3.12, this step off 2.70, real clips 2.15); kept on
-    the ground, FID (5 replications) ``actor`` 4.100 -> 3.737, ``mdm`` 1.150 -> 1.135, ``actor-large`` 1.021 -> 1.013,
+    each clip's lowest point: ``mdm`` generated 2.10 cm, refined 3.12, this step off 2.70, real clips 2.15; kept on
+    the ground 2.88); so kept, FID (5 replications) ``actor`` 4.100 -> 3.737, ``mdm`` 1.150 -> 1.135, ``actor-large`` 1.021 -> 1.013,
     ``a2m`` and ``a2m-large`` (not damped) unchanged. A clip whose action is not
     given is left alone: against every action's spreads at once, calm real clips read as damped (a tenth
     of the benchmark's clean clips, and every HumanAct12 clip against the CMU weights)."""

@@ -18,17 +18,11 @@ Shipped in both HumanAct12 weight sets (80 channels on crops turned about the ve
 0.395 -> 0.353, threshold 1.65 -> 2.35 frames, bench 38.36 -> 38.94 %, frozen 72.0 -> 75.5, reversed 35.4 -> 36.6,
 time_warp 24.2 -> 23.5; ``motion-refiner train --learned --only timing_estimator --base FOLDER`` trains it, sets its
 threshold on the split's held-out subjects and adds it to the refiner in FOLDER). A refiner with it re-times first.
-Measured first (20,000 steps) with the train-split weights, threshold 1.65 frames (1 % of subjects 9-10's clean clips):
-
-- calibration subjects 9-10 (every 2nd clip): 30.7 -> 34.9 % (time_warp -0.4 -> 25.3, frozen 57.4 -> 69.5,
-  jitter 34.3 -> 33.1, reversed 43.0 -> 40.0, foot_sliding 39.5 -> 36.9, wrong_anchor 4.4 -> 3.4), clean clips
-  touched 2.4 -> 4.7 %;
-- bench subjects 11-12: 32.1 -> 37.2 % (time_warp -0.2 -> 24.1, frozen 57.2 -> 71.6, reversed 34.6 -> 35.4,
-  jitter 37.6 -> 35.6, foot_sliding 53.8 -> 52.6), clean clips 0.008 cm, 3.3 % touched (37.1 %, 0.012 cm and
-  3.7 % while a re-timed run could hold a jump in the recording, ``retime_by_offsets(jumps=)``);
-- the bench's re-timings re-sampled by cubic splines instead of linearly (the estimator could have learnt the
-  kinks of linear interpolation, which generators do not make): time_warp -0.4 -> 23.6 %, frozen 57.4 ->
-  72.1, reversed 32.5 -> 33.8: it reads the timing, not the resampling.
+Measured first (20,000 steps, threshold 1.65 frames): calibration subjects 9-10 (every 2nd clip) 30.7 -> 34.9 %
+(time_warp -0.4 -> 25.3, frozen 57.4 -> 69.5, jitter 34.3 -> 33.1, reversed 43.0 -> 40.0, foot_sliding 39.5 -> 36.9),
+clean clips touched 2.4 -> 4.7 %; bench 32.1 -> 37.2 % (time_warp -0.2 -> 24.1, frozen 57.2 -> 71.6), clean clips
+0.008 cm, 3.3 %. The bench's re-timings re-sampled by cubic splines instead of linearly (the estimator could have
+learnt linear interpolation's kinks): time_warp -0.4 -> 23.6 %, frozen 57.4 -> 72.1: it reads the timing.
 
 A run is re-timed only where the flaw classifier's timing group agrees (``Refiner(timing_agreement=0.8)``: its
 probability reaches 0.8 somewhere in the run, read on the clip as given; a generator's clips: every run). Of the runs
@@ -37,16 +31,14 @@ the estimator alone re-timed on the calibration subjects, the glides', drifts' a
 35.81 % at 0.3 / 0.5 / 0.8 / 0.9 / 0.95); bench subjects 11-12: 37.23 -> 37.75 % (jitter 35.6 -> 37.6, foot_sliding
 52.6 -> 53.8, frozen 71.6 -> 72.0, time_warp 24.1 -> 24.2), clean clips 0.008 -> 0.003 cm, 3.3 -> 1.8 % touched.
 
-The crops turned at random (``turn``) took the validation loss from 0.51 to 0.41 (the all-subject set's, on
-subjects 11-12, 0.80 to 0.69) and the clean-clip threshold from 3.1 to 1.65 frames; unturned, the same network
-gave 34.1 % on the calibration subjects and 36.3 % on the bench (time_warp 19.5 and 18.6 %).
+Crops turned at random (``turn``): validation loss 0.51 -> 0.41, threshold 3.1 -> 1.65 frames; unturned, bench 36.3 %.
 
 Why time warps gain least: re-timed by their *true* offsets at the same threshold, the calibration subjects' warped
 clips lose 86 % of the added error (frozen transitions 92 %); by the estimate, 26 % (70 %). On the bench's warps,
 which span half a clip's transitions (median 37 frames, a tenth over 100), the estimate correlates 0.44 with the true
 offsets and reaches a third of their size; on the training crops' warps (at most 40 frames), 0.93 and its full size.
 Trained on warps of up to 120 frames in 128-frame crops, clean clips read as re-timed too (threshold 11.2 frames):
-calibration subjects 26.8 %, bench 29.5 % (time_warp 1.8 %).
+bench 29.5 % (time_warp 1.8 %).
 
 Variants that lost (bench subjects 11-12, mean of the 7 families): 64 channels, 100 epochs: 31.8 % (its
 clean-clip threshold 6.7 frames: time_warp 1.2 %; at 3 % of clean clips, 2.4 frames: time_warp 17.3 but jitter
@@ -55,12 +47,10 @@ the network seeing the clip Gaussian-smoothed (``smooth=1.5`` frames, so that no
 validation loss 0.79-0.84 against 0.50-0.53, threshold 12 frames, 31.5 %. Not taken either: the estimate averaged
 with the clip's played backwards (its offsets reversed and negated; threshold 2.8 frames): calibration subjects
 34.1 -> 34.5 % (jitter 30.5 -> 34.1, frozen 70.0 -> 69.3), bench 36.3 -> 36.2 % (time_warp 18.6 -> 22.3, frozen
-71.6 -> 66.1): no gain worth twice the passes. The estimator reading the clip through the noise filter (capped), so
-that jitter would not read as timing (before the classifier's second opinion): bench 37.23 -> 36.91 % (jitter 35.6 ->
-37.2, time_warp 24.1 -> 23.0, frozen 71.6 -> 69.8). Runs grown while their offsets stay at 0.5 frames or more
-(hysteresis): calibration subjects 34.98 -> 34.89 %. A CMU estimator (this network on CMU's training subjects,
-threshold 4.8 frames): CMU's held-out clips 25.9 -> 16.9 % (jitter 35.2 -> -14.0, wrong_anchor -2.1 -> -18.8, time_warp
-0.0 -> 14.0; 20.0 / 19.9 % at 7 / 10 frames; 20.6 % with the second opinion): the CMU weights hold none.
+71.6 -> 66.1): no gain worth twice the passes. The estimator reading the clip through the noise filter (capped):
+bench 37.23 -> 36.91 % (time_warp 24.1 -> 23.0, frozen 71.6 -> 69.8). Hysteresis on runs: 34.98 -> 34.89 %. A CMU
+estimator (this network on CMU's training subjects, threshold 4.8 frames): CMU's held-out clips 25.9 -> 16.9 % (jitter
+35.2 -> -14.0, wrong_anchor -2.1 -> -18.8, time_warp 0.0 -> 14.0; 20.6 % with the second opinion): the CMU weights hold none.
 """
 from __future__ import annotations
 
@@ -80,13 +70,19 @@ from refiner.refinement.repair_candidates import teleports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 from refiner.refinement.training_flaws import GROUPS, synthesize
 
-__all__ = ["BATCH_MARGIN", "TIMING_AGREEMENT", "TimingEstimator", "TimingNet", "timing_features", "random_retiming", "retime_by_offsets", "OTHER_KINDS"]
+__all__ = ["BATCH_MARGIN", "TIMING_AGREEMENT", "AGREED_CLIP_RATE", "AGREED_KEY", "TimingEstimator", "TimingNet", "timing_features", "random_retiming", "retime_by_offsets", "OTHER_KINDS"]
 
 #: Frames: a clip whose estimated peak offset comes this close to the threshold is estimated alone
 #: (:meth:`TimingEstimator.retiming_offsets`); batched and single passes differ by about 1e-6 frames.
 BATCH_MARGIN = 1e-3
 #: ``Refiner(timing_agreement=)``'s default: see :func:`estimated_retiming`.
 TIMING_AGREEMENT = 0.8
+#: With that agreement, runs pass at the offset this share of held-out clean clips reach (the manifest's
+#: :data:`AGREED_KEY`; alone, at 1 %). Calibration subjects 9-10 (every 2nd clip; 1 / 2 / 2.5 / 3 / 4 %: 2.35 / 1.78 /
+#: 1.51 / 1.22 / 0.91 frames): mean 37.6 / 37.9 / **38.1** / 38.0 / 37.8 % (time_warp 19.6 / 21.9 / 23.7 / 24.0 / 23.9,
+#: frozen 72.9 / 72.6 / 72.5 / 71.9 / 70.8); clean clips re-timed with the agreement: 0 / 0 / 1 / 1 / 1 of 170.
+AGREED_CLIP_RATE = 0.025
+AGREED_KEY = "timing_agreed_threshold_frames"
 #: Training flaws drawn on top of some crops: everything but timing (their offsets are zero).
 OTHER_KINDS = GROUPS["pose"] + GROUPS["noise"] + GROUPS["root"]
 
@@ -259,7 +255,8 @@ class TimingEstimator(NetworkComponent):
     network_ : TimingNet
     skeleton_ : str
     threshold_ : float
-        Frames: a run re-timed needs an offset at least this large (:meth:`calibrate`; infinite until then).
+        Frames: a run re-timed needs an offset at least this large (:meth:`calibrate`; infinite until then);
+        ``agreed_threshold_``, with the classifier's agreement, is set there too and kept in the refiner's manifest.
     history_ : list of dict
     """
 
@@ -321,15 +318,15 @@ class TimingEstimator(NetworkComponent):
             raise ValueError("`joints` must be finite; got NaN or Inf.")
         return self.network_(torch.from_numpy(smoothed_in_time(x, self.smooth)).to(self.device_)).cpu().numpy()
 
-    def retiming_offsets(self, joints) -> np.ndarray:
-        """:meth:`offsets` for re-timing: a clip whose peak comes within :data:`BATCH_MARGIN` frames of ``threshold_``
-        gets the offsets of a pass of its own. A batched convolution differs from a single clip's in the last bits
+    def retiming_offsets(self, joints, threshold: float | None = None) -> np.ndarray:
+        """:meth:`offsets` for re-timing: a clip whose peak comes within :data:`BATCH_MARGIN` frames of ``threshold``
+        (default ``threshold_``) gets the offsets of a pass of its own. A batched convolution differs from a single clip's in the last bits
         (1e-6 frames) and re-timed frames follow the offsets continuously, so a clip is re-timed from the same
         numbers alone or in a batch; the others, below the threshold by more than that, are not re-timed at all."""
         x = np.asarray(joints, np.float32)
         d = self.offsets(x)
         if len(x) > 1:
-            for b in np.flatnonzero(np.abs(d).max(1) >= self.threshold_ - BATCH_MARGIN):
+            for b in np.flatnonzero(np.abs(d).max(1) >= (self.threshold_ if threshold is None else threshold) - BATCH_MARGIN):
                 d[b] = self.offsets(x[b : b + 1])[0]
         return d
 
@@ -340,14 +337,14 @@ class TimingEstimator(NetworkComponent):
                 for c, d in zip(x, self.retiming_offsets(x))]
         return np.stack([o for o, _ in done]), [r for _, r in done]
 
-    def calibrate(self, clips, *, clip_rate: float = 0.05) -> float:
+    def calibrate(self, clips, *, clip_rate: float = 0.05, agreed_rate: float = AGREED_CLIP_RATE) -> float:
         """Set ``threshold_`` (frames) so that at most ``clip_rate`` of these clean clips (held-out subjects)
-        have an estimated offset that large anywhere; returns it."""
-        if len(clips) == 0 or not 0.0 <= clip_rate <= 1.0:
-            raise ValueError(f"calibrate needs clean clips and 0 <= clip_rate <= 1; got {len(clips)} clips, "
-                             f"clip_rate {clip_rate}.")
+        have an estimated offset that large anywhere, and ``agreed_threshold_`` so for ``agreed_rate``; returns the first."""
+        if len(clips) == 0 or not (0.0 <= clip_rate <= 1.0 and 0.0 <= agreed_rate <= 1.0):
+            raise ValueError(f"calibrate needs clean clips and rates in [0, 1]; got {len(clips)} clips, "
+                             f"clip_rate {clip_rate}, agreed_rate {agreed_rate}.")
         peaks = [float(np.abs(self.offsets(np.asarray(c, np.float32)[None])[0]).max()) for c in clips]
-        self.threshold_ = float(np.quantile(peaks, 1 - clip_rate))
+        self.threshold_, self.agreed_threshold_ = (float(np.quantile(peaks, 1 - r)) for r in (clip_rate, agreed_rate))
         return self.threshold_
 
 
@@ -370,16 +367,19 @@ def _timing_probability(refiner, clips: np.ndarray, candidates: np.ndarray, agre
 def estimated_retiming(refiner, clips: np.ndarray, reports: list, mode: str) -> np.ndarray:
     """The refiner's re-timing step: ``clips (B, T, J, 3)`` with the runs its ``timing_estimator`` finds re-timed (a
     transition step: not in ``mode="anchor"``) where the flaw classifier's timing group, read on the clip as given,
-    reaches the refiner's ``timing_agreement`` somewhere in the run (None: every run), each change in its clip's report."""
+    reaches the refiner's ``timing_agreement`` somewhere in the run (None: every run, past the estimator's own threshold;
+    with it, past the manifest's :data:`AGREED_KEY`), each change in its clip's report."""
     estimator = getattr(refiner, "timing_estimator", None)
     if estimator is None or getattr(refiner, "retiming", "estimated") != "estimated" or mode == "anchor":
         return clips
-    offsets = estimator.retiming_offsets(clips)
     agreement = getattr(refiner, "timing_agreement", TIMING_AGREEMENT)
-    timing = _timing_probability(refiner, clips, np.abs(offsets).max(1) >= estimator.threshold_, agreement)
+    threshold = estimator.threshold_ if agreement is None else float(
+        getattr(refiner, "manifest", {}).get("learned", {}).get(AGREED_KEY, estimator.threshold_))
+    offsets = estimator.retiming_offsets(clips, threshold)
+    timing = _timing_probability(refiner, clips, np.abs(offsets).max(1) >= threshold, agreement)
     out = clips.copy()
     for b, report in enumerate(reports):
-        out[b], runs = retime_by_offsets(clips[b], offsets[b], estimator.threshold_, widen=estimator.widen,
+        out[b], runs = retime_by_offsets(clips[b], offsets[b], threshold, widen=estimator.widen,
                                          jumps=teleports(clips[b]))
         if timing is not None:  # the classifier's second opinion: a run it does not read as a timing flaw stays as given
             for lo, hi in [r for r in runs if timing[b, r[0] : r[1]].max() < agreement]:
@@ -395,6 +395,6 @@ def estimated_retiming(refiner, clips: np.ndarray, reports: list, mode: str) -> 
             report.changes.append({"start": lo, "stop": hi, "step": "transition", "repair": "estimated_retime",
                                    "reason": f"the timing estimator put these poses up to "
                                              f"{float(np.abs(offsets[b][lo:hi]).max()):.1f} frames from their own moments "
-                                             f"(threshold {estimator.threshold_:.1f}); re-timed (moved {moved:.1f} cm on "
+                                             f"(threshold {threshold:.1f}); re-timed (moved {moved:.1f} cm on "
                                              "average)"})
     return out

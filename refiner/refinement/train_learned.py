@@ -33,7 +33,7 @@ from refiner.refinement.pose_prior import PosePrior
 from refiner.refinement.rigid_step import NATURAL_BONES_KEY
 from refiner.refinement.skating import SKATING_KEY, calibrate_skating
 from refiner.refinement.texture_filter import TextureFilter
-from refiner.refinement.timing_estimation import TimingEstimator
+from refiner.refinement.timing_estimation import AGREED_KEY, TimingEstimator
 
 __all__ = ["LEARNED_CONFIGS", "LEARNED_PARTS", "OPTIONAL_PARTS", "train_learned", "train_learned_refiner", "install_learned",
            "calibrate_learned", "calibration_split", "install_part", "add_optional_part", "STORED_INT8", "CLIP_RATE", "POSE_QUANTILE", "POSE_TEXTURE_QUANTILE", "bone_proportion_records", "CONVERTED_SKELETONS",
@@ -253,6 +253,8 @@ def install_part(folder: str | Path, name: str, part, *, info: dict | None = Non
     learned = dict(manifest.get("learned", {}))
     if _THRESHOLD_KEYS[name] is not None:
         learned[_THRESHOLD_KEYS[name]] = float(part.threshold_)
+    if getattr(part, "agreed_threshold_", None) is not None:  # the timing estimator's, with the classifier's agreement
+        learned[AGREED_KEY] = float(part.agreed_threshold_)
     learned[name] = info or {}
     write_manifest(folder / "manifest.json", {**manifest, "learned": learned,
                                               "files": {**manifest["files"], name: {"file": path.name,
@@ -278,7 +280,7 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
     if only is not None:
         return None
     thresholds = calibrate_learned(parts, dataset, split=split)  # the parts keep their own thresholds
-    kept = {k: thresholds[k] for k in (NATURAL_BONES_KEY, SKATING_KEY) if k in thresholds}
+    kept = {k: thresholds[k] for k in (NATURAL_BONES_KEY, SKATING_KEY, AGREED_KEY) if k in thresholds}
     base = _default_base(dataset, split) if base is None else base
     info = {}
     for name in LEARNED_PARTS + OPTIONAL_PARTS:
@@ -360,8 +362,8 @@ def calibrate_learned(parts: dict, dataset: MotionDataset, *, split: str = "all"
             "correction_threshold_m": parts["flaw_repairer"].calibrate(clips, actions, clip_rate=clip_rate),
             **({"denoiser_threshold_m": parts["flaw_denoiser"].calibrate(clips, clip_rate=clip_rate)}
                if "flaw_denoiser" in parts else {}),
-            **({"timing_threshold_frames": parts["timing_estimator"].calibrate(clips, clip_rate=TIMING_CLIP_RATE)}
-               if "timing_estimator" in parts else {}),
+            **({"timing_threshold_frames": parts["timing_estimator"].calibrate(clips, clip_rate=TIMING_CLIP_RATE),
+                AGREED_KEY: parts["timing_estimator"].agreed_threshold_} if "timing_estimator" in parts else {}),
             **({"noise_threshold_m": parts["noise_filter"].calibrate(clips, clip_rate=clip_rate)}
                if "noise_filter" in parts else {}),
             **(dict(zip(("pose_prior_threshold_m", "pose_prior_texture_threshold_m"), parts["pose_prior"].calibrate(
