@@ -33,21 +33,19 @@ the estimator alone re-timed on the calibration subjects, the glides', drifts' a
 
 Crops turned at random (``turn``): validation loss 0.51 -> 0.41, threshold 3.1 -> 1.65 frames; unturned, bench 36.3 %.
 
-Why time warps gain least: re-timed by their *true* offsets at the same threshold, the calibration subjects' warped
-clips lose 86 % of the added error (frozen transitions 92 %); by the estimate, 26 % (70 %). On the bench's warps,
+Why time warps gain least: re-timed by their *true* offsets, the calibration subjects' warped clips lose 86 % of the
+added error (frozen 92 %); by the estimate, 26 % (70 %). On the bench's warps,
 which span half a clip's transitions (median 37 frames, a tenth over 100), the estimate correlates 0.44 with the true
 offsets and reaches a third of their size; on the training crops' warps (at most 40 frames), 0.93 and its full size.
-Trained on warps of up to 120 frames in 128-frame crops, clean clips read as re-timed too (threshold 11.2 frames):
-bench 29.5 % (time_warp 1.8 %).
+Trained on warps of up to 120 frames in 128-frame crops: threshold 11.2 frames, bench 29.5 % (time_warp 1.8 %).
 
 Variants that lost (bench subjects 11-12, mean of the 7 families): 64 channels, 100 epochs: 31.8 % (its
 clean-clip threshold 6.7 frames: time_warp 1.2 %; at 3 % of clean clips, 2.4 frames: time_warp 17.3 but jitter
 29.3, foot_sliding 43.9); 128 channels, 40 epochs (1.36 MB per set as float16, past the weights budget): 34.7 %;
 the network seeing the clip Gaussian-smoothed (``smooth=1.5`` frames, so that noise would not read as timing):
 validation loss 0.79-0.84 against 0.50-0.53, threshold 12 frames, 31.5 %. Not taken either: the estimate averaged
-with the clip's played backwards (its offsets reversed and negated; threshold 2.8 frames): calibration subjects
-34.1 -> 34.5 % (jitter 30.5 -> 34.1, frozen 70.0 -> 69.3), bench 36.3 -> 36.2 % (time_warp 18.6 -> 22.3, frozen
-71.6 -> 66.1): no gain worth twice the passes. The estimator reading the clip through the noise filter (capped):
+with the clip's played backwards (offsets reversed and negated; threshold 2.8 frames): bench 36.3 -> 36.2 % (time_warp
+18.6 -> 22.3, frozen 71.6 -> 66.1): no gain worth twice the passes. The estimator reading the clip through the noise filter (capped):
 bench 37.23 -> 36.91 % (time_warp 24.1 -> 23.0, frozen 71.6 -> 69.8). Hysteresis on runs: 34.98 -> 34.89 %. A CMU
 estimator (this network on CMU's training subjects, threshold 4.8 frames): CMU's held-out clips 25.9 -> 16.9 % (jitter
 35.2 -> -14.0, wrong_anchor -2.1 -> -18.8, time_warp 0.0 -> 14.0; 20.6 % with the second opinion): the CMU weights hold none.
@@ -379,6 +377,8 @@ def estimated_retiming(refiner, clips: np.ndarray, reports: list, mode: str) -> 
     timing = _timing_probability(refiner, clips, np.abs(offsets).max(1) >= threshold, agreement)
     out = clips.copy()
     for b, report in enumerate(reports):
+        if np.abs(offsets[b]).max() < threshold:  # no run: spare the clip its search for jumps
+            continue
         out[b], runs = retime_by_offsets(clips[b], offsets[b], threshold, widen=estimator.widen,
                                          jumps=teleports(clips[b]))
         if timing is not None:  # the classifier's second opinion: a run it does not read as a timing flaw stays as given
