@@ -15,7 +15,8 @@ a random frame), refined with the true action; prints the share of the added MPJ
 - ``stutter``: every 2nd frame of the window shown twice (dropped frames);
 - ``damped`` / ``exaggerated``: the window's root-relative motion scaled by 0.5 / 1.5 about its mean pose (ramped);
 - ``same_foot``: the legs swapped and mirrored about the body's midplane over the window (ramped over 4 frames):
-  in a walk, a step with the same foot twice;
+  in a walk, a step with the same foot twice; ``same_foot_abrupt``: the same without ramps; ``legs_relabelled``: the
+  left and right legs' joints trade places as they are, not mirrored (ramped over 4 frames: labels confused);
 - ``arm_up``: an arm held where it was at the window's start (its elbow, wrist and hand fixed to the shoulder, in
   the world's frame), let go over 6 frames at its end; ``arm_never_down``: held to the clip's end;
 
@@ -42,7 +43,8 @@ SKEL = get_skeleton("humanact12")
 UP = SKEL.up_vector
 ARMS = {side: [SKEL.index(f"{side}_{j}") for j in ("elbow", "wrist", "hand")] for side in ("left", "right")}
 LEGS = [[SKEL.index(f"{side}_{j}") for j in ("hip", "knee", "ankle", "foot")] for side in ("left", "right")]
-FLAWS = ("float", "sink", "stutter", "damped", "exaggerated", "same_foot", "arm_up", "arm_never_down")
+FLAWS = ("float", "sink", "stutter", "damped", "exaggerated", "same_foot", "same_foot_abrupt", "legs_relabelled", "arm_up",
+         "arm_never_down")
 NO_FLAWS = ("faster", "mirrored")
 
 
@@ -80,11 +82,12 @@ def corrupted(x, rng, recipe):
         rel = y - y[:, :1]
         mean = rel[a:b].mean(0)
         return y + w * (mean + (0.5 if recipe == "damped" else 1.5) * (rel - mean) - rel)
-    if recipe == "same_foot":
+    if recipe in ("same_foot", "same_foot_abrupt", "legs_relabelled"):
         t = np.arange(a, b)
-        v = ramp(n, a, b, 4)[t][:, None, None]
-        for leg, new in zip(LEGS, mirrored_legs(x, t)):
-            y[t[:, None], leg] = v * new + (1 - v) * x[t][:, leg]
+        v = ramp(n, a, b, 1 if recipe == "same_foot_abrupt" else 4)[t][:, None, None]
+        new = [x[t][:, leg] for leg in LEGS[::-1]] if recipe == "legs_relabelled" else mirrored_legs(x, t)
+        for leg, other in zip(LEGS, new):
+            y[t[:, None], leg] = v * other + (1 - v) * x[t][:, leg]
         return y
     if recipe in ("arm_up", "arm_never_down"):
         side = ("left", "right")[int(rng.integers(2))]

@@ -20,7 +20,8 @@
    finds the result more real (:data:`VERIFY_TYPED`). Only the flagged runs are spliced in (displacement zero at the
    kept frames, smoothstep taper), and changed frames go back on the input's bone lengths. A run that contains a
    recognised anchor is reported as an anchor refinement, the others as transition refinements. A body that glides
-   over its planted feet is moved back (:mod:`refiner.refinement.skating`). Last, the noise steps
+   over its planted feet is moved back (:mod:`refiner.refinement.skating`), and legs that show each other's motion
+   are swapped back to their sides (:mod:`refiner.refinement.swapped_sides`). Last, the noise steps
    (:func:`filtered_noise`), the pose prior (:func:`prior_posed`), the texture filter
    (:func:`~refiner.refinement.texture_filter.filtered_texture`), the repeats of dropped frames put back in time
    (:mod:`refiner.refinement.repeated_frames`) and the kept frames of a rigid core's clip put on its lengths.
@@ -42,6 +43,7 @@ from refiner.refinement.skating import deskated
 from refiner.refinement.rigid_step import natural_bones_back, noisy_bones, rigid_at_last, rigid_first
 from refiner.refinement.noise_filter import filtered_noise
 from refiner.refinement.pose_prior import prior_posed
+from refiner.refinement.swapped_sides import unswapped
 from refiner.refinement.timing_estimation import estimated_retiming
 from refiner.refinement.texture_filter import filtered_texture
 from refiner.refinement.report import RefinementReport, repair_words, start_reports
@@ -386,6 +388,7 @@ def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: 
                     report.flagged_transitions.append([lo, hi])
             out[b] = project_bone_lengths(y, reference_lengths(clips[b], refiner.skeleton), changed, refiner.skeleton)
     out = deskated(refiner, out, reports, mode)  # a body gliding over its planted feet
+    out = unswapped(refiner, out, reports, mode, _select)  # after the run repairs: a reversed run's turn swaps legs too
     noise = None if clf_all is None else np.maximum(clf_all[..., 1 + _GROUP_NAMES.index("noise")],  # before any snap
                                                     noisy_bones(refiner, given, cored))  # bones too
     out, noisy = filtered_noise(refiner, snapped_to_concepts(refiner, out, reports, mode), reports, noise, (out != clips).any((2, 3)), mode)

@@ -1,0 +1,144 @@
+"""Left/right confusion: a window in which a limb pair shows each side's motion on the other side.
+
+A generator (or the refinement issue's training flaw ``mirror``) can put the left leg's motion on the right
+leg for a while: in a walk, a step with the same foot twice. Each frame of such a window is a pose a body can
+hold, so nothing in one frame tells it; what tells it is the jump into and out of the window, where each leg
+leaves its own path for the other's. Swapping the sides back over the right window makes the limbs move least:
+:func:`swapped_window` finds that window from the limbs' speed, and :func:`unswapped`, a step of the learned
+pipeline after the flagged runs are repaired, swaps the legs back there where that takes most of their motion away,
+and keeps it only where the flaw classifier finds the result more real than the given frames. It runs after the run
+repairs because a reversed run's turn looks like a swap too: in a run, the legs swapped show the pose half a stride
+on, and one held-out reversal, swapped first, was no longer cut (0.16 -> 1.27 cm).
+
+A side is swapped by reflecting it across the plane that bisects the pair's two root joints (the hips for
+legs): the left leg's pose becomes a right leg's pose, as a body would hold it.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from refiner.core.skeletons import Skeleton, get_skeleton
+from refiner.refinement.splicing import project_bone_lengths, reference_lengths
+from refiner.refinement.training_flaws import limb_joints, mirror_pairs
+
+__all__ = ["limb_pair", "sides_swapped", "swapped_window", "unswapped", "MIN_FRAMES", "SWAP_RATIO"]
+
+#: Fewest frames of a swapped window (0.4 s at 20 fps: a step takes longer). At 3, 11 of 600 ``a2m`` samples had 3-5
+#: frames of jittery, nearly symmetric legs swapped; at 8, 4 (the same-foot recipes of ``examples/measure_body_recipes.py``,
+#: 15-40 frames, unchanged).
+MIN_FRAMES = 8
+#: A window is offered to the flaw classifier where swapping the legs back leaves them this share of their motion
+#: (:func:`swapped_window`'s ratio) or less: 3 of HumanAct12's 919 training subjects' clean clips reach it (0.5 %: 0.89,
+#: 1 %: 0.98), 19 of CMU's 815 (0.5 %: 0.76); the classifier verifies each. 0: the step is off.
+SWAP_RATIO = 0.86
+
+
+def limb_pair(skeleton, joint: str = "hip") -> tuple[np.ndarray, np.ndarray] | None:
+    """Joint indices ``(left (K,), right (K,))`` of the limbs rooted at ``left_<joint>`` and ``right_<joint>``
+    (the joint and its descendants, in matching order); None where the skeleton has no such joints."""
+    skel = get_skeleton(skeleton)
+    if f"left_{joint}" not in skel.joint_names or f"right_{joint}" not in skel.joint_names:
+        return None
+    left = limb_joints(skel, skel.index(f"left_{joint}"))
+    return left, mirror_pairs(skel)[left]
+
+
+def sides_swapped(x: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """``x (..., T, J, 3)`` metres with the ``left`` and ``right`` limbs (``(K,)`` joint indices, roots first) swapped,
+    each reflected across the plane through the midpoint of the two roots, normal to the line joining them."""
+    x = np.asarray(x, np.float64)
+    out = x.copy()
+    normal = x[..., right[0], :] - x[..., left[0], :]  # (..., T, 3)
+    normal = (normal / np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-9))[..., None, :]
+    middle = 0.5 * (x[..., right[0], :] + x[..., left[0], :])[..., None, :]
+    for to, source in ((left, right), (right, left)):
+        rel = x[..., source, :] - middle
+        out[..., to, :] = middle + rel - 2 * (rel * normal).sum(-1, keepdims=True) * normal
+    return out
+
+
+def swapped_window(x: np.ndarray, left: np.ndarray, right: np.ndarray, lo: int = 0, hi: int | None = None,
+                   min_frames: int = MIN_FRAMES) -> tuple:
+    """The window ``[a, b)`` within ``[lo, hi)`` whose sides swapped back take the most off the pair's motion.
+
+    The pair's motion is the sum of its joints' squared steps from frame ``a - 1`` to ``b``, relative to the midpoint
+    of their roots (the body's own motion is no clue). For one clip ``x (T, J, 3)`` metres, returns ``(ratio, a, b)``
+    for the window where swapping back lowers it most, ``ratio`` being that sum after the swap over the sum before
+    (under 1: the limbs move less); ``(inf, -1, -1)`` where no window fits. For a batch ``(B, T, J, 3)``, three
+    ``(B,)`` arrays. Both ends lie inside the clip (``1 <= a``, ``b <= T - 1``): a window needs a frame on each side to
+    be told from a clip that is simply mirrored.
+    """
+    x = np.asarray(x, np.float64)
+    if x.ndim not in (3, 4) or x.shape[-1] != 3:
+        raise ValueError(f"`x` must be (T, J, 3) or (B, T, J, 3); got shape {x.shape}.")
+    batch = x if x.ndim == 4 else x[None]
+    n_clips, n = batch.shape[:2]
+    ratio, start, stop = np.full(n_clips, np.inf), np.full(n_clips, -1), np.full(n_clips, -1)
+    first, last = max(lo, 1), min(n if hi is None else hi, n - 1)  # a window's first frame, its end
+    if last - first >= min_frames:
+        k = len(left)
+        pair = batch[:, :, np.r_[left, right]]  # (B, T, 2K, 3): the pair alone
+        middle = 0.5 * (pair[:, :, :1] + pair[:, :, k : k + 1])  # the swap keeps it
+        given, swapped = pair - middle, sides_swapped(pair, np.arange(k), np.arange(k, 2 * k)) - middle
+
+        def squared(d):  # (B, T - 1, 2K, 3) -> (B, T - 1)
+            return np.einsum("btjc,btjc->bt", d, d)
+
+        step_given, step_swapped = squared(np.diff(given, axis=1)), squared(np.diff(swapped, axis=1))  # step t -> t + 1
+        into = squared(swapped[:, 1:] - given[:, :-1])  # the step into a window starting at t + 1
+        out_of = squared(given[:, 1:] - swapped[:, :-1])  # the step out of a window ending at t
+        zero = np.zeros((n_clips, 1))
+        cum_given, cum_swapped = np.hstack([zero, np.cumsum(step_given, 1)]), np.hstack([zero, np.cumsum(step_swapped, 1)])
+        # the gain of window [a, b) is a part of its start plus a part of its end, so the best start for each end is the
+        # best so far among the starts at least min_frames before it: one pass, whatever the clip's length
+        a = np.arange(first, last - min_frames + 1)
+        b = a + min_frames
+        head = cum_swapped[:, a] - cum_given[:, a - 1] - into[:, a - 1]  # (B, starts)
+        tail = cum_given[:, b] - cum_swapped[:, b - 1] - out_of[:, b - 1]  # (B, ends)
+        best_head = np.maximum.accumulate(head, axis=1)
+        rising = head > np.hstack([np.full((n_clips, 1), -np.inf), best_head[:, :-1]])
+        best_start = np.maximum.accumulate(np.where(rising, np.arange(len(a)), 0), axis=1)
+        j = np.argmax(best_head + tail, axis=1)
+        start, stop = a[best_start[np.arange(n_clips), j]], b[j]
+        rows = np.arange(n_clips)
+        before = cum_given[rows, stop] - cum_given[rows, start - 1]
+        after = into[rows, start - 1] + cum_swapped[rows, stop - 1] - cum_swapped[rows, start] + out_of[rows, stop - 1]
+        ratio = after / np.maximum(before, 1e-12)
+    if x.ndim == 4:
+        return ratio, start, stop
+    return float(ratio[0]), int(start[0]), int(stop[0])
+
+
+def unswapped(refiner, clips: np.ndarray, reports: list, mode: str, select) -> np.ndarray:
+    """The refiner's left/right step: in each of ``clips (B, T, J, 3)`` metres, the legs swapped back over the window
+    :func:`swapped_window` finds where that makes them move under :data:`SWAP_RATIO` of what they did, put on the clip's
+    bone lengths (each leg takes the other's pose, not its lengths), and kept where ``select`` (the learned pipeline's
+    choice by the flaw classifier, ``select(refiner, clip, {name: candidate}, start, stop) -> (name or "keep",
+    note)``) finds it more real than the given frames; each change in its clip's report. A transition step: not in
+    ``mode="anchor"``; nothing without a flaw classifier to verify it."""
+    pair = limb_pair(refiner.skeleton, "hip")
+    if pair is None or mode == "anchor" or getattr(refiner, "flaw_classifier", None) is None or not SWAP_RATIO > 0:
+        return clips
+    out = clips
+    ratios, starts, stops = swapped_window(clips, *pair, min_frames=MIN_FRAMES)
+    for b in np.flatnonzero(ratios < SWAP_RATIO):
+        report, ratio, lo, hi = reports[b], float(ratios[b]), int(starts[b]), int(stops[b])
+        x = np.asarray(clips[b], np.float64)
+        y = x.copy()
+        y[lo:hi] = sides_swapped(x[lo:hi], *pair)
+        frames = np.zeros(len(x), bool)
+        frames[lo:hi] = True
+        # no splice: the window's ends are the jumps the swap removes, and blending across them would cross the legs
+        y = project_bone_lengths(y, reference_lengths(x, refiner.skeleton), frames, refiner.skeleton).astype(clips.dtype)
+        chosen, note = select(refiner, clips[b], {"swapped_legs": y}, lo, hi)
+        if chosen == "keep":
+            report.notes.append(f"frames {lo}-{hi - 1}: the legs swapped back would move {ratio:.2f} times as much; "
+                                f"{note}")
+            continue
+        if out is clips:
+            out = clips.copy()
+        out[b] = y
+        report.changes.append({"start": lo, "stop": hi, "step": "transition", "repair": "swapped_legs", "reason":
+                               f"each leg showed the other's motion: swapped back to their sides, the legs move "
+                               f"{ratio:.2f} times as much (under {SWAP_RATIO}){note}"})
+    return out

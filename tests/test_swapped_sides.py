@@ -1,0 +1,79 @@
+"""Left/right confusion: legs that show each other's motion over a window are found by the jumps into and out of
+it, and swapped back where the flaw classifier finds that more real."""
+import numpy as np
+import pytest
+
+import refiner.refinement.swapped_sides as swapped_sides
+from refiner.core.skeletons import Skeleton, bone_lengths, get_skeleton
+from refiner.refinement.pipeline import Refiner
+from refiner.refinement.swapped_sides import limb_pair, sides_swapped, swapped_window
+
+
+def _walk(humanact12):
+    """A held-out walking clip (subject 11, 109 frames)."""
+    i = int(np.flatnonzero((humanact12.subjects == 11) & (humanact12.actions == 1))[0])
+    return humanact12[i]
+
+
+def _swapped_over(x, a, b):
+    pair = limb_pair("humanact12")
+    out = np.array(x, copy=True)
+    out[a:b] = sides_swapped(x[a:b], *pair)
+    return out
+
+
+def test_every_shipped_skeleton_has_matching_legs():
+    for name in ("humanact12", "uestc", "cmu_mocap", "humanml3d"):
+        skel = get_skeleton(name)
+        left, right = limb_pair(name)
+        assert len(left) == len(right) >= 3
+        for l, r in zip(left, right):
+            assert skel.joint_names[l].replace("left", "right") == skel.joint_names[r]
+    assert limb_pair("humanact12", "shoulder")[0].tolist() == [16, 18, 20, 22]
+    assert limb_pair("humanact12", "no_such_joint") is None
+    assert limb_pair(Skeleton("legless_test", ("root", "a", "b"), (-1, 0, 1))) is None  # the step then leaves clips alone
+
+
+@pytest.mark.real_data
+def test_swapping_twice_gives_the_clip_back_and_each_leg_the_others_lengths(humanact12):
+    x = _walk(humanact12).joints.astype(np.float64)
+    left, right = limb_pair("humanact12")
+    once = sides_swapped(x, left, right)
+    np.testing.assert_allclose(sides_swapped(once, left, right), x, atol=1e-9)
+    others = np.setdiff1d(np.arange(24), np.r_[left, right])
+    np.testing.assert_array_equal(once[:, others], x[:, others])
+    lengths, swapped = bone_lengths(x, "humanact12"), bone_lengths(once, "humanact12")
+    bones = get_skeleton("humanact12").bones
+    child = {int(c): k for k, (_, c) in enumerate(bones)}
+    for l, r in zip(left[1:], right[1:]):  # the bones below the hips
+        np.testing.assert_allclose(swapped[:, child[int(l)]], lengths[:, child[int(r)]], rtol=1e-9)
+    with pytest.raises(ValueError, match=r"\(T, J, 3\)"):
+        swapped_window(x[0], left, right)
+
+
+@pytest.mark.real_data
+def test_the_window_is_found_by_the_jumps_into_and_out_of_it(humanact12):
+    x = _walk(humanact12).joints.astype(np.float64)
+    pair = limb_pair("humanact12")
+    ratio, a, b = swapped_window(_swapped_over(x, 30, 45), *pair)
+    assert (a, b) == (30, 45) and ratio < 0.5, (ratio, a, b)
+    assert swapped_window(x, *pair)[0] > swapped_sides.SWAP_RATIO  # the clean walk offers no window
+    assert swapped_window(_swapped_over(x, 30, 45), *pair, lo=50)[1:] != (30, 45)  # only inside [lo, hi)
+    assert swapped_window(x[:4], *pair) == (np.inf, -1, -1)  # no room for a window with a frame on each side
+
+
+@pytest.mark.real_data
+def test_refine_swaps_the_legs_back(humanact12, monkeypatch):
+    clip = _walk(humanact12)
+    x = clip.joints
+    bad = _swapped_over(x, 30, 45).astype(np.float32)
+    given = bad.copy()
+    model = Refiner.pretrained("humanact12", split="train")
+    out, report = model.refine(bad, action=clip.action, return_report=True)
+    np.testing.assert_array_equal(bad, given)  # the input is not modified
+    err = lambda y: np.linalg.norm(y - x, axis=-1).mean()  # noqa: E731
+    assert err(out) < 0.2 * err(bad), (err(out), err(bad))
+    assert [(c["start"], c["stop"]) for c in report.changes if c.get("repair") == "swapped_legs"] == [(30, 45)]
+    assert err(model.refine(bad, action=clip.action, mode="anchor")) > 0.8 * err(bad)  # a transition step
+    monkeypatch.setattr(swapped_sides, "SWAP_RATIO", 0.0)  # off
+    assert err(model.refine(bad, action=clip.action)) > 0.8 * err(bad)
