@@ -17,6 +17,8 @@ a random frame), refined with the true action; prints the share of the added MPJ
 - ``same_foot``: the legs swapped and mirrored about the body's midplane over the window (ramped over 4 frames):
   in a walk, a step with the same foot twice; ``same_foot_abrupt``: the same without ramps; ``legs_relabelled``: the
   left and right legs' joints trade places as they are, not mirrored (ramped over 4 frames: labels confused);
+  ``limbs_relabelled``: every left joint trades places with its right one as they are, without ramps (the training
+  flaw ``mirror`` at full weight);
 - ``arm_up``: an arm held where it was at the window's start (its elbow, wrist and hand fixed to the shoulder, in
   the world's frame), let go over 6 frames at its end; ``arm_never_down``: held to the clip's end;
 
@@ -43,8 +45,8 @@ SKEL = get_skeleton("humanact12")
 UP = SKEL.up_vector
 ARMS = {side: [SKEL.index(f"{side}_{j}") for j in ("elbow", "wrist", "hand")] for side in ("left", "right")}
 LEGS = [[SKEL.index(f"{side}_{j}") for j in ("hip", "knee", "ankle", "foot")] for side in ("left", "right")]
-FLAWS = ("float", "sink", "stutter", "damped", "exaggerated", "same_foot", "same_foot_abrupt", "legs_relabelled", "arm_up",
-         "arm_never_down")
+FLAWS = ("float", "sink", "stutter", "damped", "exaggerated", "same_foot", "same_foot_abrupt", "legs_relabelled",
+         "limbs_relabelled", "arm_up", "arm_never_down")
 NO_FLAWS = ("faster", "mirrored")
 
 
@@ -88,6 +90,9 @@ def corrupted(x, rng, recipe):
         new = [x[t][:, leg] for leg in LEGS[::-1]] if recipe == "legs_relabelled" else mirrored_legs(x, t)
         for leg, other in zip(LEGS, new):
             y[t[:, None], leg] = v * other + (1 - v) * x[t][:, leg]
+        return y
+    if recipe == "limbs_relabelled":
+        y[a:b] = x[a:b][:, mirror_pairs(SKEL)]
         return y
     if recipe in ("arm_up", "arm_never_down"):
         side = ("left", "right")[int(rng.integers(2))]

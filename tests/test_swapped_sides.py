@@ -57,7 +57,7 @@ def test_the_window_is_found_by_the_jumps_into_and_out_of_it(humanact12):
     pair = limb_pair("humanact12")
     ratio, a, b = swapped_window(_swapped_over(x, 30, 45), *pair)
     assert (a, b) == (30, 45) and ratio < 0.5, (ratio, a, b)
-    assert swapped_window(x, *pair)[0] > swapped_sides.SWAP_RATIO  # the clean walk offers no window
+    assert swapped_window(x, *pair)[0] > swapped_sides.SWAPS["swapped_legs"][2]  # the clean walk offers no window
     assert swapped_window(_swapped_over(x, 30, 45), *pair, lo=50)[1:] != (30, 45)  # only inside [lo, hi)
     assert swapped_window(x[:4], *pair) == (np.inf, -1, -1)  # no room for a window with a frame on each side
 
@@ -75,5 +75,23 @@ def test_refine_swaps_the_legs_back(humanact12, monkeypatch):
     assert err(out) < 0.2 * err(bad), (err(out), err(bad))
     assert [(c["start"], c["stop"]) for c in report.changes if c.get("repair") == "swapped_legs"] == [(30, 45)]
     assert err(model.refine(bad, action=clip.action, mode="anchor")) > 0.8 * err(bad)  # a transition step
-    monkeypatch.setattr(swapped_sides, "SWAP_RATIO", 0.0)  # off
+    monkeypatch.setattr(swapped_sides, "SWAPS", {})  # off
     assert err(model.refine(bad, action=clip.action)) > 0.8 * err(bad)
+
+
+@pytest.mark.real_data
+def test_relabelled_arms_trade_places_back(humanact12):
+    """The training flaw ``mirror``: the arms' joints trade places as they are (no reflection) over a window."""
+    clip = _walk(humanact12)
+    x = clip.joints
+    arms = limb_pair("humanact12", "collar")
+    traded = sides_swapped(x, *arms, mirrored=False)
+    np.testing.assert_array_equal(traded[:, arms[0]], x[:, arms[1]])
+    np.testing.assert_array_equal(sides_swapped(traded, *arms, mirrored=False), x)
+    bad = np.array(x, copy=True)
+    bad[40:60] = traded[40:60]
+    assert swapped_window(bad, *arms, mirrored=False)[1:] == (40, 60)
+    assert swapped_window(x, *arms, mirrored=False)[0] > swapped_sides.SWAPS["relabelled_arms"][2]
+    out, report = Refiner.pretrained("humanact12", split="train").refine(bad, action=clip.action, return_report=True)
+    assert np.linalg.norm(out - x, axis=-1).mean() < 0.1 * np.linalg.norm(bad - x, axis=-1).mean()
+    assert [(c["start"], c["stop"]) for c in report.changes if c.get("repair") == "relabelled_arms"] == [(40, 60)]

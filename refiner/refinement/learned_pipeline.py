@@ -183,15 +183,15 @@ def flag_runs(prob: np.ndarray, threshold: float, *, min_run: int = 2, margin: i
     return [(a, b) for a, b in out]
 
 
-def _select(refiner, y, spliced: dict, lo: int, hi: int) -> tuple[str, str]:
+def _select(refiner, y, spliced: dict, lo: int, hi: int, penalty: float | None = None) -> tuple[str, str]:
     """The candidate the flaw classifier finds most real around ``[lo, hi)``, with a small price per
-    centimetre moved (``refiner.change_penalty``); "keep" (no change) is a candidate too."""
+    centimetre moved (``penalty``, default ``refiner.change_penalty``); "keep" (no change) is a candidate too."""
     names = ["keep", *spliced]
     clips = np.stack([y, *spliced.values()])
     prob = refiner.flaw_classifier.predict(clips)
     w0, w1 = max(lo - _SCORE_CONTEXT, 0), min(hi + _SCORE_CONTEXT, len(y))
     moved = 100 * np.linalg.norm(clips[:, lo:hi] - y[lo:hi], axis=-1).mean((1, 2))
-    score = prob[:, w0:w1].mean(1) + refiner.change_penalty * moved
+    score = prob[:, w0:w1].mean(1) + (refiner.change_penalty if penalty is None else penalty) * moved
     best = int(np.argmin(score))
     note = f"; chosen among {len(names)} candidates, flaw probability {prob[0, w0:w1].mean():.2f} -> " \
            f"{prob[best, w0:w1].mean():.2f}"

@@ -102,7 +102,9 @@ REPAIR_WORDS = {
     "spline": "smoothed in time by a smoothing spline fitted to it (smoothness by cross-validation)",
     "planted_feet": "whole body moved back by the slip of the feet planted on the ground",
     "grounded": "whole body moved back down (or up) by the rise (or fall) its feet and root share",
-    "swapped_legs": "legs swapped back to their own sides where each showed the other's motion",
+    "swapped_legs": "legs swapped back to their own sides where each showed the other's motion (mirrored)",
+    "relabelled_legs": "legs swapped back to their own sides where their joints had traded places",
+    "relabelled_arms": "arms swapped back to their own sides where their joints had traded places",
 }
 
 

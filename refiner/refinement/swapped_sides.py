@@ -10,8 +10,12 @@ and keeps it only where the flaw classifier finds the result more real than the 
 repairs because a reversed run's turn looks like a swap too: in a run, the legs swapped show the pose half a stride
 on, and one held-out reversal, swapped first, was no longer cut (0.16 -> 1.27 cm).
 
-A side is swapped by reflecting it across the plane that bisects the pair's two root joints (the hips for
-legs): the left leg's pose becomes a right leg's pose, as a body would hold it.
+Two kinds of swap are looked for (:data:`SWAPS`). *Mirrored* legs: each side reflected across the plane that bisects
+the pair's two root joints (the hips), so the left leg's pose becomes a right leg's pose, as a body would hold it (a
+step with the same foot twice). *Relabelled* legs or arms: the two sides' joints trade places as they are (the
+training flaw ``mirror``: a skeleton's labels confused), which puts each limb on the wrong side of the body. A
+relabelling blended in over a few frames is not found: the limbs then meet and cross, and swapping them back
+(meeting and parting) moves them as much.
 """
 from __future__ import annotations
 
@@ -21,16 +25,24 @@ from refiner.core.skeletons import Skeleton, get_skeleton
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 from refiner.refinement.training_flaws import limb_joints, mirror_pairs
 
-__all__ = ["limb_pair", "sides_swapped", "swapped_window", "unswapped", "MIN_FRAMES", "SWAP_RATIO"]
+__all__ = ["limb_pair", "sides_swapped", "swapped_window", "unswapped", "MIN_FRAMES", "SWAPS"]
 
 #: Fewest frames of a swapped window (0.4 s at 20 fps: a step takes longer). At 3, 11 of 600 ``a2m`` samples had 3-5
 #: frames of jittery, nearly symmetric legs swapped; at 8, 4 (the same-foot recipes of ``examples/measure_body_recipes.py``,
 #: 15-40 frames, unchanged).
 MIN_FRAMES = 8
-#: A window is offered to the flaw classifier where swapping the legs back leaves them this share of their motion
-#: (:func:`swapped_window`'s ratio) or less: 3 of HumanAct12's 919 training subjects' clean clips reach it (0.5 %: 0.89,
-#: 1 %: 0.98), 19 of CMU's 815 (0.5 %: 0.76); the classifier verifies each. 0: the step is off.
-SWAP_RATIO = 0.86
+#: The swaps looked for, in this order: name -> (the limb's root joint, the first a skeleton has; mirrored or relabelled;
+#: the largest ratio of :func:`swapped_window` offered to the flaw classifier; the classifier's price per centimetre
+#: moved when it judges the swap, None: the pipeline's ``change_penalty``). Mirrored legs at 0.86: 3 of HumanAct12's 919
+#: training subjects' clean clips reach it (0.5 %: 0.89, 1 %: 0.98), 19 of CMU's 815 (0.5 %: 0.76); judged at the
+#: pipeline's price (at none, 600 ``a2m`` samples: 19 clips swapped, not 7, FID 3.533 -> 3.543). Relabelled limbs at 0.5:
+#: no clean training clip comes near (lowest 0.75 legs, 0.68 arms; 0.5 %: 1.0 and 1.17), relabelled windows of the
+#: recipes' (15-40 frames) 0.02 / 0.07 (median, legs / arms), 0.22 / 0.23 (90 %); judged at no price, since they move
+#: the limbs some 20 cm (at the pipeline's 0.01, the classifier refused most relabelled arms it found more real: 10.9
+#: against 93.6 % of the error removed on the calibration subjects). Mirrored arms are not looked for: clean arms reach
+#: 0.63 at 0.5 %, since arms move on their own. Empty: the step is off.
+SWAPS = {"swapped_legs": (("hip",), True, 0.86, None), "relabelled_legs": (("hip",), False, 0.5, 0.0),
+         "relabelled_arms": (("collar", "shoulder"), False, 0.5, 0.0)}
 
 
 def limb_pair(skeleton, joint: str = "hip") -> tuple[np.ndarray, np.ndarray] | None:
@@ -43,11 +55,15 @@ def limb_pair(skeleton, joint: str = "hip") -> tuple[np.ndarray, np.ndarray] | N
     return left, mirror_pairs(skel)[left]
 
 
-def sides_swapped(x: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """``x (..., T, J, 3)`` metres with the ``left`` and ``right`` limbs (``(K,)`` joint indices, roots first) swapped,
-    each reflected across the plane through the midpoint of the two roots, normal to the line joining them."""
+def sides_swapped(x: np.ndarray, left: np.ndarray, right: np.ndarray, mirrored: bool = True) -> np.ndarray:
+    """``x (..., T, J, 3)`` metres with the ``left`` and ``right`` limbs (``(K,)`` joint indices, roots first) swapped:
+    ``mirrored``, each reflected across the plane through the midpoint of the two roots, normal to the line joining
+    them; else the two sides' joints trade places as they are."""
     x = np.asarray(x, np.float64)
     out = x.copy()
+    if not mirrored:
+        out[..., left, :], out[..., right, :] = x[..., right, :], x[..., left, :]
+        return out
     normal = x[..., right[0], :] - x[..., left[0], :]  # (..., T, 3)
     normal = (normal / np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-9))[..., None, :]
     middle = 0.5 * (x[..., right[0], :] + x[..., left[0], :])[..., None, :]
@@ -58,8 +74,9 @@ def sides_swapped(x: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndar
 
 
 def swapped_window(x: np.ndarray, left: np.ndarray, right: np.ndarray, lo: int = 0, hi: int | None = None,
-                   min_frames: int = MIN_FRAMES) -> tuple:
-    """The window ``[a, b)`` within ``[lo, hi)`` whose sides swapped back take the most off the pair's motion.
+                   min_frames: int = MIN_FRAMES, mirrored: bool = True) -> tuple:
+    """The window ``[a, b)`` within ``[lo, hi)`` whose sides swapped back (:func:`sides_swapped`) take the most off the
+    pair's motion.
 
     The pair's motion is the sum of its joints' squared steps from frame ``a - 1`` to ``b``, relative to the midpoint
     of their roots (the body's own motion is no clue). For one clip ``x (T, J, 3)`` metres, returns ``(ratio, a, b)``
@@ -79,7 +96,7 @@ def swapped_window(x: np.ndarray, left: np.ndarray, right: np.ndarray, lo: int =
         k = len(left)
         pair = batch[:, :, np.r_[left, right]]  # (B, T, 2K, 3): the pair alone
         middle = 0.5 * (pair[:, :, :1] + pair[:, :, k : k + 1])  # the swap keeps it
-        given, swapped = pair - middle, sides_swapped(pair, np.arange(k), np.arange(k, 2 * k)) - middle
+        given, swapped = pair - middle, sides_swapped(pair, np.arange(k), np.arange(k, 2 * k), mirrored) - middle
 
         def squared(d):  # (B, T - 1, 2K, 3) -> (B, T - 1)
             return np.einsum("btjc,btjc->bt", d, d)
@@ -110,35 +127,39 @@ def swapped_window(x: np.ndarray, left: np.ndarray, right: np.ndarray, lo: int =
 
 
 def unswapped(refiner, clips: np.ndarray, reports: list, mode: str, select) -> np.ndarray:
-    """The refiner's left/right step: in each of ``clips (B, T, J, 3)`` metres, the legs swapped back over the window
-    :func:`swapped_window` finds where that makes them move under :data:`SWAP_RATIO` of what they did, put on the clip's
-    bone lengths (each leg takes the other's pose, not its lengths), and kept where ``select`` (the learned pipeline's
-    choice by the flaw classifier, ``select(refiner, clip, {name: candidate}, start, stop) -> (name or "keep",
-    note)``) finds it more real than the given frames; each change in its clip's report. A transition step: not in
-    ``mode="anchor"``; nothing without a flaw classifier to verify it."""
-    pair = limb_pair(refiner.skeleton, "hip")
-    if pair is None or mode == "anchor" or getattr(refiner, "flaw_classifier", None) is None or not SWAP_RATIO > 0:
+    """The refiner's left/right step: for each swap of :data:`SWAPS` in turn, in each of ``clips (B, T, J, 3)`` metres,
+    the limbs swapped back over the window :func:`swapped_window` finds where that leaves them at most the swap's ratio
+    of their motion, put on the clip's bone lengths (each limb takes the other's pose, not its lengths), and kept where
+    ``select`` (the learned pipeline's choice by the flaw classifier, ``select(refiner, clip, {name: candidate}, start,
+    stop, penalty=) -> (name or "keep", note)``) finds it more real than the given frames at the swap's price; each change in its clip's report. A
+    transition step: not in ``mode="anchor"``; nothing without a flaw classifier to verify it."""
+    if mode == "anchor" or getattr(refiner, "flaw_classifier", None) is None:
         return clips
     out = clips
-    ratios, starts, stops = swapped_window(clips, *pair, min_frames=MIN_FRAMES)
-    for b in np.flatnonzero(ratios < SWAP_RATIO):
-        report, ratio, lo, hi = reports[b], float(ratios[b]), int(starts[b]), int(stops[b])
-        x = np.asarray(clips[b], np.float64)
-        y = x.copy()
-        y[lo:hi] = sides_swapped(x[lo:hi], *pair)
-        frames = np.zeros(len(x), bool)
-        frames[lo:hi] = True
-        # no splice: the window's ends are the jumps the swap removes, and blending across them would cross the legs
-        y = project_bone_lengths(y, reference_lengths(x, refiner.skeleton), frames, refiner.skeleton).astype(clips.dtype)
-        chosen, note = select(refiner, clips[b], {"swapped_legs": y}, lo, hi)
-        if chosen == "keep":
-            report.notes.append(f"frames {lo}-{hi - 1}: the legs swapped back would move {ratio:.2f} times as much; "
-                                f"{note}")
+    for name, (roots, mirrored, max_ratio, penalty) in SWAPS.items():
+        pair = next((p for p in (limb_pair(refiner.skeleton, r) for r in roots) if p is not None), None)
+        if pair is None:
             continue
-        if out is clips:
-            out = clips.copy()
-        out[b] = y
-        report.changes.append({"start": lo, "stop": hi, "step": "transition", "repair": "swapped_legs", "reason":
-                               f"each leg showed the other's motion: swapped back to their sides, the legs move "
-                               f"{ratio:.2f} times as much (under {SWAP_RATIO}){note}"})
+        ratios, starts, stops = swapped_window(out, *pair, min_frames=MIN_FRAMES, mirrored=mirrored)
+        for b in np.flatnonzero(ratios < max_ratio):
+            report, ratio, lo, hi = reports[b], float(ratios[b]), int(starts[b]), int(stops[b])
+            x = np.asarray(out[b], np.float64)
+            y = x.copy()
+            y[lo:hi] = sides_swapped(x[lo:hi], *pair, mirrored)
+            frames = np.zeros(len(x), bool)
+            frames[lo:hi] = True
+            # no splice: the window's ends are the jumps the swap removes, and blending across them would cross the limbs
+            y = project_bone_lengths(y, reference_lengths(x, refiner.skeleton), frames, refiner.skeleton).astype(clips.dtype)
+            chosen, note = select(refiner, out[b], {name: y}, lo, hi, penalty=penalty)
+            limbs = name.split("_")[1]
+            if chosen == "keep":
+                report.notes.append(f"frames {lo}-{hi - 1}: the {limbs} swapped back ({'mirrored' if mirrored else 'as they are'})"
+                                    f" would move {ratio:.2f} times as much; {note}")
+                continue
+            if out is clips:
+                out = clips.copy()
+            out[b] = y
+            report.changes.append({"start": lo, "stop": hi, "step": "transition", "repair": name, "reason":
+                                   f"each of the {limbs} showed the other's motion: swapped back to their sides, they move "
+                                   f"{ratio:.2f} times as much (under {max_ratio}){note}"})
     return out
