@@ -65,11 +65,10 @@ def sides_swapped(x: np.ndarray, left: np.ndarray, right: np.ndarray, mirrored: 
         out[..., left, :], out[..., right, :] = x[..., right, :], x[..., left, :]
         return out
     normal = x[..., right[0], :] - x[..., left[0], :]  # (..., T, 3)
-    normal = (normal / np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-9))[..., None, :]
+    normal /= np.maximum(np.sqrt(np.einsum("...c,...c->...", normal, normal)), 1e-9)[..., None]
     middle = 0.5 * (x[..., right[0], :] + x[..., left[0], :])[..., None, :]
-    for to, source in ((left, right), (right, left)):
-        rel = x[..., source, :] - middle
-        out[..., to, :] = middle + rel - 2 * (rel * normal).sum(-1, keepdims=True) * normal
+    rel = x[..., np.r_[right, left], :] - middle  # the sources of the left, then the right joints
+    out[..., np.r_[left, right], :] = middle + rel - 2 * np.einsum("...jc,...c->...j", rel, normal)[..., None] * normal[..., None, :]
     return out
 
 
@@ -85,7 +84,7 @@ def swapped_window(x: np.ndarray, left: np.ndarray, right: np.ndarray, lo: int =
     ``(B,)`` arrays. Both ends lie inside the clip (``1 <= a``, ``b <= T - 1``): a window needs a frame on each side to
     be told from a clip that is simply mirrored.
     """
-    x = np.asarray(x, np.float64)
+    x = np.asarray(x)
     if x.ndim not in (3, 4) or x.shape[-1] != 3:
         raise ValueError(f"`x` must be (T, J, 3) or (B, T, J, 3); got shape {x.shape}.")
     batch = x if x.ndim == 4 else x[None]
@@ -94,14 +93,15 @@ def swapped_window(x: np.ndarray, left: np.ndarray, right: np.ndarray, lo: int =
     first, last = max(lo, 1), min(n if hi is None else hi, n - 1)  # a window's first frame, its end
     if last - first >= min_frames:
         k = len(left)
-        pair = batch[:, :, np.r_[left, right]]  # (B, T, 2K, 3): the pair alone
+        pair = batch[:, :, np.r_[left, right]].astype(np.float64)  # (B, T, 2K, 3): the pair alone
         middle = 0.5 * (pair[:, :, :1] + pair[:, :, k : k + 1])  # the swap keeps it
         given, swapped = pair - middle, sides_swapped(pair, np.arange(k), np.arange(k, 2 * k), mirrored) - middle
 
         def squared(d):  # (B, T - 1, 2K, 3) -> (B, T - 1)
             return np.einsum("btjc,btjc->bt", d, d)
 
-        step_given, step_swapped = squared(np.diff(given, axis=1)), squared(np.diff(swapped, axis=1))  # step t -> t + 1
+        step_given = squared(np.diff(given, axis=1))  # (B, T - 1): step t -> t + 1
+        step_swapped = squared(np.diff(swapped, axis=1)) if mirrored else step_given  # relabelled: the same steps
         into = squared(swapped[:, 1:] - given[:, :-1])  # the step into a window starting at t + 1
         out_of = squared(given[:, 1:] - swapped[:, :-1])  # the step out of a window ending at t
         zero = np.zeros((n_clips, 1))
