@@ -536,3 +536,16 @@ def test_typed_motion_infill_repair_and_its_stand_in(tiny_learned, humanact12, m
     assert result.shape == clips.shape and np.isfinite(result).all()
     names = {c.get("repair") for r in reports for c in r.changes} - {None}
     assert names == {"motion_infill" if with_infiller else "network_infill"}, names
+
+
+def test_norms_are_numpys_norms_bit_for_bit():
+    from refiner.core.signal import norms
+
+    rng = np.random.default_rng(3)
+    for dtype in (np.float32, np.float64):
+        for shape in ((5, 7, 24, 3), (40, 2), (3,), (4, 9)):  # 9 components: numpy's own (pairwise) sum
+            v = rng.normal(size=shape).astype(dtype)
+            out = norms(v)
+            assert out.dtype == dtype and out.shape == shape[:-1]
+            np.testing.assert_array_equal(out, np.linalg.norm(v, axis=-1))
+    np.testing.assert_array_equal(norms(np.array([[3, 4], [6, 8]])), [5.0, 10.0])  # integers as float64

@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from refiner.core.signal import norms
+
 __all__ = [
     "Skeleton",
     "joint_bone_lengths",
@@ -136,7 +138,7 @@ def bone_lengths(joints, skeleton: Skeleton | str) -> np.ndarray:
     skel = get_skeleton(skeleton) if isinstance(skeleton, str) else skeleton
     x = np.asarray(joints)
     bones = skel.bones
-    return np.linalg.norm(x[..., bones[:, 1], :] - x[..., bones[:, 0], :], axis=-1)
+    return norms(x[..., bones[:, 1], :] - x[..., bones[:, 0], :])
 
 
 def joint_bone_lengths(joints, skeleton: Skeleton | str) -> np.ndarray:

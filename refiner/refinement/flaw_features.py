@@ -26,6 +26,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from refiner.core.contact import foot_joints
+from refiner.core.signal import norms
 from refiner.core.skeletons import bone_lengths, get_skeleton
 
 __all__ = ["flaw_features", "N_FEATURES"]
@@ -53,10 +54,10 @@ def flaw_features(joints, skeleton="humanact12") -> np.ndarray:
     sign = float(skel.up_vector[up])
     horiz = [a for a in range(3) if a != up]
     vel = _diff(x, 1)
-    speed = np.linalg.norm(vel, axis=-1)  # (B, T, J)
-    acc = np.linalg.norm(_diff(x, 2), axis=-1)
-    jerk = np.linalg.norm(_diff(x, 3), axis=-1)
-    resid = np.linalg.norm(x - gaussian_filter1d(x, 1.0, axis=1, mode="nearest"), axis=-1)
+    speed = norms(vel)  # (B, T, J)
+    acc = norms(_diff(x, 2))
+    jerk = norms(_diff(x, 3))
+    resid = norms(x - gaussian_filter1d(x, 1.0, axis=1, mode="nearest"))
     lengths = bone_lengths(x, skel)  # (B, T, J-1)
     dev = np.abs(lengths / np.maximum(np.median(lengths, 1, keepdims=True), 1e-6) - 1.0)
     root = x[:, :, skel.root]
@@ -64,12 +65,12 @@ def flaw_features(joints, skeleton="humanact12") -> np.ndarray:
     feats = [10 * speed.mean(-1), 10 * speed.max(-1), 100 * acc.mean(-1), 100 * acc.max(-1), 100 * jerk.mean(-1),
              100 * jerk.max(-1), 100 * resid.mean(-1), 100 * resid.max(-1), 10 * dev.mean(-1), 10 * dev.max(-1),
              height - np.median(height, 1, keepdims=True), 10 * sign * vel[:, :, skel.root, up],
-             10 * np.linalg.norm(vel[:, :, skel.root][..., horiz], axis=-1)]
+             10 * norms(vel[:, :, skel.root][..., horiz])]
     for f in foot_joints(skel):
         h = sign * x[:, :, f, up]
-        feats += [10 * np.linalg.norm(vel[:, :, f][..., horiz], axis=-1), 10 * (h - h.min(1, keepdims=True))]
+        feats += [10 * norms(vel[:, :, f][..., horiz]), 10 * (h - h.min(1, keepdims=True))]
     prev = np.concatenate([vel[:, :1], vel[:, :-1]], 1)
-    cos = (vel * prev).sum(-1) / np.maximum(np.linalg.norm(vel, axis=-1) * np.linalg.norm(prev, axis=-1), 1e-9)
+    cos = (vel * prev).sum(-1) / np.maximum(speed * norms(prev), 1e-9)
     w = speed / np.maximum(speed.sum(-1, keepdims=True), 1e-9)
     feats.append((w * cos).sum(-1))
     base = np.stack(feats, -1)  # (B, T, 18)
