@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from refiner.core.skeletons import Skeleton, get_skeleton
+from refiner.core.skeletons import get_skeleton
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 from refiner.refinement.training_flaws import limb_joints, mirror_pairs
 
 __all__ = ["limb_pair", "sides_swapped", "swapped_window", "unswapped", "MIN_FRAMES", "SWAPS"]
 
-#: Fewest frames of a swapped window (0.4 s at 20 fps: a step takes longer). At 3, 11 of 600 ``a2m`` samples had 3-5
-#: frames of jittery, nearly symmetric legs swapped; at 8, 4 (the same-foot recipes of ``examples/measure_body_recipes.py``,
-#: 15-40 frames, unchanged).
+#: Fewest frames of a swapped window (0.4 s at 20 fps: a step takes longer). With the legs' motion read in the world's
+#: frame (a first version), 11 of 600 ``a2m`` samples at 3 had 3-5 frames of jittery, nearly symmetric legs swapped, 4
+#: at 8 (the same-foot recipes of ``examples/measure_body_recipes.py``, 15-40 frames, unchanged); as shipped, 7.
 MIN_FRAMES = 8
 #: The swaps looked for, in this order: name -> (the limb's root joint, the first a skeleton has; mirrored or relabelled;
 #: the largest ratio of :func:`swapped_window` offered to the flaw classifier; the classifier's price per centimetre
