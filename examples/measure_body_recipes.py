@@ -18,7 +18,8 @@ a random frame), refined with the true action; prints the share of the added MPJ
   in a walk, a step with the same foot twice; ``same_foot_abrupt``: the same without ramps; ``legs_relabelled``: the
   left and right legs' joints trade places as they are, not mirrored (ramped over 4 frames: labels confused);
   ``limbs_relabelled``: every left joint trades places with its right one as they are, without ramps (the training
-  flaw ``mirror`` at full weight);
+  flaw ``mirror`` at full weight); ``limbs_blended``: every left joint blended with its right one by a weight of
+  0.6-1.0, ramped over 4 frames (the training flaw ``mirror`` as it is drawn);
 - ``arm_up``: an arm held where it was at the window's start (its elbow, wrist and hand fixed to the shoulder, in
   the world's frame), let go over 6 frames at its end; ``arm_never_down``: held to the clip's end;
 
@@ -46,7 +47,7 @@ UP = SKEL.up_vector
 ARMS = {side: [SKEL.index(f"{side}_{j}") for j in ("elbow", "wrist", "hand")] for side in ("left", "right")}
 LEGS = [[SKEL.index(f"{side}_{j}") for j in ("hip", "knee", "ankle", "foot")] for side in ("left", "right")]
 FLAWS = ("float", "sink", "stutter", "damped", "exaggerated", "same_foot", "same_foot_abrupt", "legs_relabelled",
-         "limbs_relabelled", "arm_up", "arm_never_down")
+         "limbs_relabelled", "limbs_blended", "arm_up", "arm_never_down")
 NO_FLAWS = ("faster", "mirrored")
 
 
@@ -94,6 +95,9 @@ def corrupted(x, rng, recipe):
     if recipe == "limbs_relabelled":
         y[a:b] = x[a:b][:, mirror_pairs(SKEL)]
         return y
+    if recipe == "limbs_blended":
+        v = rng.uniform(0.6, 1.0) * ramp(n, a, b, 4)[:, None, None]
+        return y + v * (y[:, mirror_pairs(SKEL)] - y)
     if recipe in ("arm_up", "arm_never_down"):
         side = ("left", "right")[int(rng.integers(2))]
         shoulder, arm = SKEL.index(f"{side}_shoulder"), ARMS[side]

@@ -6,7 +6,7 @@ import pytest
 import refiner.refinement.swapped_sides as swapped_sides
 from refiner.core.skeletons import Skeleton, bone_lengths, get_skeleton
 from refiner.refinement.pipeline import Refiner
-from refiner.refinement.swapped_sides import limb_pair, sides_swapped, swapped_window
+from refiner.refinement.swapped_sides import blend_weights, limb_pair, sides_swapped, swapped_window, unblended
 
 
 def _walk(humanact12):
@@ -95,3 +95,43 @@ def test_relabelled_arms_trade_places_back(humanact12):
     out, report = Refiner.pretrained("humanact12", split="train").refine(bad, action=clip.action, return_report=True)
     assert np.linalg.norm(out - x, axis=-1).mean() < 0.1 * np.linalg.norm(bad - x, axis=-1).mean()
     assert [(c["start"], c["stop"]) for c in report.changes if c.get("repair") == "relabelled_arms"] == [(40, 60)]
+
+
+def _blended(x, pair, a, b, weight, ramp=4):
+    """``x`` with ``pair``'s sides blended by ``weight`` over ``a..b-1`` (smoothstep ramps of ``ramp`` frames), as the
+    training flaw ``mirror`` blends them: ``left' = (1 - w) left + w right``."""
+    from refiner.core.signal import smoothstep
+
+    t = np.arange(len(x), dtype=float)
+    w = weight * smoothstep(np.clip((t - a + 1) / ramp, 0, 1)) * smoothstep(np.clip((b - t) / ramp, 0, 1))
+    out = np.array(x, np.float64, copy=True)
+    left, right = pair
+    out[:, left] = (1 - w)[:, None, None] * x[:, left] + w[:, None, None] * x[:, right]
+    out[:, right] = (1 - w)[:, None, None] * x[:, right] + w[:, None, None] * x[:, left]
+    return out, w
+
+
+@pytest.mark.real_data
+def test_a_blended_relabelling_is_read_from_the_hips_and_undone(humanact12, monkeypatch):
+    clip = _walk(humanact12)
+    x = clip.joints.astype(np.float64)
+    legs, arms = limb_pair("humanact12", "hip"), limb_pair("humanact12", "collar")
+    assert blend_weights(x, *legs, "humanact12") is None and blend_weights(x, *arms, "humanact12") is None
+    assert blend_weights(_swapped_over(x, 30, 45), *legs, "humanact12") is None  # whole swaps: SWAPS tell which kind
+    bad, w = _blended(x, legs, 30, 60, 0.8)
+    found = blend_weights(bad, *legs, "humanact12")
+    np.testing.assert_allclose(found[w >= swapped_sides.SLIGHT], w[w >= swapped_sides.SLIGHT], atol=1e-4)
+    undone, frames = unblended(bad, *legs, "humanact12")
+    sure = np.abs(1 - 2 * w) >= swapped_sides.DEGENERATE
+    np.testing.assert_allclose(undone[sure], x[sure], atol=1e-4)
+    assert frames[30:60].all() and not frames[:25].any()
+    both, _ = _blended(bad, arms, 30, 60, 0.8)
+    model = Refiner.pretrained("humanact12", split="train")
+    assert not {c.get("repair") for c in model.refine(both.astype(np.float32), return_report=True)[1].changes} & {
+        "unblended_legs", "unblended_arms"}  # off by default (see BLENDS)
+    monkeypatch.setattr(swapped_sides, "BLENDS", True)
+    out, report = Refiner.pretrained("humanact12", split="train").refine(both.astype(np.float32), action=clip.action,
+                                                                         return_report=True)
+    err = lambda y: np.linalg.norm(y - x, axis=-1).mean()  # noqa: E731
+    assert err(out) < 0.3 * err(both), (err(out), err(both))
+    assert {c.get("repair") for c in report.changes} >= {"unblended_legs", "unblended_arms"}

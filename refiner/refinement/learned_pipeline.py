@@ -43,7 +43,7 @@ from refiner.refinement.skating import deskated
 from refiner.refinement.rigid_step import natural_bones_back, noisy_bones, rigid_at_last, rigid_first
 from refiner.refinement.noise_filter import filtered_noise
 from refiner.refinement.pose_prior import prior_posed
-from refiner.refinement.swapped_sides import unswapped
+from refiner.refinement.swapped_sides import unblended_sides, unswapped
 from refiner.refinement.timing_estimation import estimated_retiming
 from refiner.refinement.texture_filter import filtered_texture
 from refiner.refinement.report import RefinementReport, repair_words, start_reports
@@ -273,6 +273,7 @@ def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
 
 def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
+    clips = unblended_sides(refiner, clips, reports, mode)  # before the rigid step rebuilds crossed hips
     given, (clips, cored, drifting) = clips, rigid_first(refiner, clips, reports)
     rigid = clips
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it

@@ -105,6 +105,8 @@ REPAIR_WORDS = {
     "swapped_legs": "legs swapped back to their own sides where each showed the other's motion (mirrored)",
     "relabelled_legs": "legs swapped back to their own sides where their joints had traded places",
     "relabelled_arms": "arms swapped back to their own sides where their joints had traded places",
+    "unblended_legs": "legs' sides unblended where their joints had been blended with the other side's",
+    "unblended_arms": "arms' sides unblended where their joints had been blended with the other side's",
 }
 
 
