@@ -240,6 +240,16 @@ def unblended(x: np.ndarray, left: np.ndarray, right: np.ndarray, skeleton) -> t
     return out + x[:, [root]], w > 0
 
 
+def _crossing(clips: np.ndarray, pair) -> np.ndarray:
+    """Indices of ``clips (B, T, J, 3)`` where the pair's roots turn by over 90 degrees in a step or nearly meet: the
+    only clips where a blend can reach :data:`PEAK` (a cheap look at the whole batch before :func:`blend_weights`)."""
+    axis = np.asarray(clips[:, :, pair[1][0]] - clips[:, :, pair[0][0]], np.float64)  # (B, T, 3)
+    dist = np.sqrt((axis * axis).sum(-1))
+    turned = ((axis[:, 1:] * axis[:, :-1]).sum(-1) < 0).any(1)
+    met = (dist < 0.05 * dist.max(1, keepdims=True)).any(1)
+    return np.flatnonzero(turned | met)
+
+
 def _motion(x, pair, lo, hi) -> float:
     """The pair's squared joint steps from frame ``lo - 1`` to ``hi``, relative to the midpoint of its roots."""
     x = np.asarray(x, np.float64)[max(lo - 1, 0) : hi + 1]
@@ -261,7 +271,7 @@ def unblended_sides(refiner, clips: np.ndarray, reports: list, mode: str) -> np.
     out = clips
     for limbs, roots in (("legs", ("hip",)), ("arms", ("collar", "shoulder"))):
         pair = next((p for p in (limb_pair(refiner.skeleton, r) for r in roots) if p is not None), None)
-        for b in range(len(out)) if pair is not None else ():
+        for b in _crossing(out, pair) if pair is not None else ():
             y, frames = unblended(out[b], *pair, refiner.skeleton)
             if not frames.any():
                 continue
