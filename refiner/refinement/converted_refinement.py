@@ -21,9 +21,11 @@ import numpy as np
 from refiner.core.motion import Motion
 from refiner.core.output_kind import like_input
 from refiner.core.skeleton_conversion import convert, estimated_joints
-from refiner.core.rigid import rough_bones
+from refiner.core.rigid import FLEXIBLE_BONES, bending_bones, rough_bones
 from refiner.core.skeletons import BoneProportions, get_skeleton, rigid_skeleton
 from refiner.core.validation import check_joints
+from refiner.refinement import blended_pose
+from refiner.refinement.blended_pose import blend_change, unblended_pose
 from refiner.refinement.inputs import MIN_FRAMES, check_metres_each, thread_limits
 from refiner.refinement.noise_filter import denoised_noise_runs
 from refiner.refinement.pose_prior import drifting_skeleton, prior_posed
@@ -31,15 +33,6 @@ from refiner.refinement import rigid_step
 from refiner.refinement.texture_filter import filtered_texture
 
 __all__ = ["ConvertedRefiner", "FLEXIBLE_BONES", "converts_with_humanact12"]
-
-#: "Bones" of a layout that span a bending chain, so real motion changes their length: left out of
-#: the rigid-skeleton step. Measured on HumanAct12 subjects 1-10 (every 10th clip) converted to each
-#: layout, median coefficient of variation (all other bones: 0.00 %).
-FLEXIBLE_BONES = {
-    "uestc": (("mid_hip", "neck"), ("neck", "right_shoulder"), ("neck", "left_shoulder"), ("neck", "nose")),  # 0.5-3.3 %
-    "cmu_mocap": (("pelvis", "spine"), ("spine", "left_shoulder"), ("spine", "right_shoulder")),  # 0.7-2.2 %
-}
-
 
 class ConvertedRefiner:
     """Refine clips of ``skeleton`` with ``base`` (a :class:`~refiner.refinement.pipeline.Refiner` of another skeleton).
@@ -76,9 +69,7 @@ class ConvertedRefiner:
         self.action_names = base.action_names
         self.estimated = estimated_joints(base.skeleton, self.skeleton)
         skel = get_skeleton(self.skeleton)
-        flexible = {frozenset(pair) for pair in FLEXIBLE_BONES.get(self.skeleton, ())}
-        self.rigid_bones = np.array([frozenset((skel.joint_names[a], skel.joint_names[b])) not in flexible
-                                     for a, b in skel.bones])
+        self.rigid_bones = ~bending_bones(self.skeleton)
         estimated_joints(self.skeleton, base.skeleton)  # refuses skeletons the conversion cannot reach
         if proportions is not None and proportions.mean.shape != (len(skel.bones),):
             raise ValueError(f"`proportions` must have one share per {self.skeleton} bone ({len(skel.bones)}); "
@@ -130,6 +121,10 @@ class ConvertedRefiner:
         known = [a if isinstance(a, str) and a in self.action_names else None for a in actions]
         long_enough = clips.shape[1] >= MIN_FRAMES  # shorter clips come back exactly as given
         core = bool(getattr(self.base, "rigid_core", False))  # mocap edited in places: on its exact frames' lengths
+        # blended poses are read from the clip's own exact bones (bending chains held to their ends' lengths)
+        unblend = long_enough and core and mode != "transition" and blended_pose.UNBLEND
+        blends = [unblended_pose(c, self.skeleton, self.rigid_bones) if unblend else (c, []) for c in clips]
+        clips = np.stack([c for c, _ in blends]).astype(clips.dtype, copy=False)
         rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones,
                                 proportions=self.proportions, keep_core=core, spikes=core) if long_enough else (c, 0.0)
                  for c in clips]
@@ -161,8 +156,9 @@ class ConvertedRefiner:
         out[changed] = (given[changed] + delta[changed]).astype(np.float32)
         note = (f"refined as {self.base.skeleton!r} through refiner.core.skeletons.convert; only the change came back"
                 + (f" (estimated on the way back: {', '.join(self.estimated)})" if self.estimated else ""))
-        for report, (joints, variation), clip, asked, used in zip(reports, rigid, clips, actions, known):
+        for report, (joints, variation), clip, asked, used, (_, found) in zip(reports, rigid, clips, actions, known, blends):
             report.notes.append(note)
+            report.changes[:0] = [blend_change(blend) for blend in found]
             if asked is not None and used is None:
                 report.notes.append(f"action {asked!r} is not one of the refiner's actions; refined action-agnostic")
             if variation > self.rigid_tolerance:

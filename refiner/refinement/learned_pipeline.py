@@ -1,6 +1,7 @@
 """Refinement with the learned steps (``method="learned"``, the default): recognise, repair, splice, make rigid.
 
-0. **Rigid skeleton**, first: where a clip's bones vary in length more than mocap's
+0. **Blended poses** taken out where the exact bones show them (:mod:`refiner.refinement.blended_pose`); then the
+   **rigid skeleton**: where a clip's bones vary in length more than mocap's
    (``rigid_tolerance``, coefficient of variation; real HumanAct12 clips: under 0.001 %), its frames are put
    back on the clip's median bone lengths (with ``rigid_core``, a mocap clip edited in places keeps its exact
    frames and those whose bones only shorten, until the last step), so the detectors judge the motion, not the bones.
@@ -33,6 +34,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from refiner.core.skeletons import get_skeleton
 from refiner.refinement.amplitude import restored_amplitude
+from refiner.refinement.blended_pose import unblended_poses
 from refiner.refinement.anchor_recognition import anchor_peaks
 from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
@@ -114,18 +116,16 @@ _GROUP_NAMES = tuple(GROUPS)
 #:   1.07 -> 0.93 %, mean of 7 40.47 -> 40.46 %. ``grounded`` from the lowest foot alone: calibration wrong_anchor 1.3 %.
 TYPED_REPAIRS = {"timing": ("stall_retime", 2), "root": ("network+planted_feet|grounded", 0), "pose": ("planted_feet", 0),
                  "noise": ("noise_filter", 0)}
-#: Groups whose typed repair is kept only when the flaw classifier finds the result more real than
-#: the given frames (:func:`_select` with the one candidate): a body moved back over skating feet or
-#: a network correction is right for gliding and floating bodies and wrong for a wrong pose, which
-#: skates too. Re-timing stays unverified: the classifier rejected most re-timed stalls, which remove
-#: 42 % there; so does smoothing, which it cannot judge: noise runs pass :data:`NOISE_RATIO` instead.
+#: Groups whose typed repair is kept only when the flaw classifier finds the result more real than the given frames
+#: (:func:`_select` with the one candidate): a body moved back over skating feet or a network correction is right for
+#: gliding and floating bodies and wrong for a wrong pose, which skates too. Re-timing stays unverified: the classifier
+#: rejected most re-timed stalls, which remove 42 % there; so does smoothing, which it cannot judge (:data:`NOISE_RATIO`).
 VERIFY_TYPED = ("root", "pose")
 #: A noise run is repaired only where it is this many times noisier (jitter residual: distance from a
 #: Gaussian smoothing of sigma 1 frame) than its clip's median frame: noise is a local flaw, and a
 #: clip that is as rough everywhere has that texture from its generator (see :func:`noise_ratio`).
 NOISE_RATIO = 1.3
-#: A timing run is grown over the stall before it and the rush after it (:func:`stall_window`) before it
-#: is re-timed; False: the widened run alone (frozen 58.9 % vs 50.6 %).
+#: A timing run is grown over the stall before it and the rush after it (:func:`stall_window`) before it is re-timed; False: the widened run alone (frozen 58.9 % vs 50.6 %).
 STALL_WINDOW = True
 #: Detectors that can flag frames (``detect="classifier+recognizer"``: the union): the kinematic flaw classifier,
 #: the recognition network's flaw probability, the repair network's or the denoiser's correction.
@@ -274,6 +274,7 @@ def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
 def refine_batch(refiner, clips: np.ndarray, actions: list, mode: str, reports: list) -> np.ndarray:
     """Refine ``clips (B, T, J, 3)`` float32 with ``refiner``'s learned steps, filling ``reports`` in place."""
     clips = unblended_sides(refiner, clips, reports, mode)  # before the rigid step rebuilds crossed hips
+    clips = unblended_poses(refiner, clips, reports, mode)  # ... or puts blended bones back on their lengths
     given, (clips, cored, drifting) = clips, rigid_first(refiner, clips, reports)
     rigid = clips
     clips = restored_amplitude(refiner, clips, actions, reports)  # a damped clip: every detector misjudges it

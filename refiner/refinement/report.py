@@ -107,6 +107,7 @@ REPAIR_WORDS = {
     "relabelled_arms": "arms swapped back to their own sides where their joints had traded places",
     "unblended_legs": "legs' sides unblended where their joints had been blended with the other side's",
     "unblended_arms": "arms' sides unblended where their joints had been blended with the other side's",
+    "unblended_pose": "a pose blended in taken out, read from how it shortened and stretched the clip's exact bones",
 }
 
 
