@@ -2,9 +2,9 @@
 
 A pose blended toward another over a window (the benchmark's ``wrong_anchor``: ``x'(t) = x(t) + w(t) Δ``, ``Δ`` a
 constant offset of every joint from the root, ``w`` a weight that rises from 0 and falls back) leaves a mocap clip's
-bones exact outside the window (its rigid core, :func:`refiner.core.rigid.rigid_core`) and shortens and stretches them
-inside it. Every bone ``j`` then reads ``b'_j(t) = b_j(t) + w(t) δ_j`` (``δ_j`` the difference of its two joints'
-offsets), while the true bone ``b_j(t)`` keeps the core's length ``L_j``:
+bones exact outside the window (its exact core: the frames whose bones match the first frame's, as the last frame's
+must) and shortens and stretches them inside it. Every bone ``j`` then reads ``b'_j(t) = b_j(t) + w(t) δ_j`` (``δ_j``
+the difference of its two joints' offsets), while the true bone ``b_j(t)`` keeps the core's length ``L_j``:
 
     ``|b'_j(t) - w(t) δ_j| = L_j``  for every frame of the window and every bone.
 
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from refiner.core.rigid import EXACT_TOLERANCE, bending_bones, rigid_core
+from refiner.core.rigid import EXACT_TOLERANCE, bending_bones
 from refiner.core.skeletons import bone_lengths, get_skeleton
 
 __all__ = ["blend_windows", "one_chain", "fit_blend", "unblended_pose", "unblended_poses", "blend_change", "UNBLEND",
@@ -192,10 +192,7 @@ def unblended_pose(joints: np.ndarray, skeleton, bones: np.ndarray | None = None
     off_first = (np.abs(lengths - lengths[0]) / np.maximum(lengths[0], 1e-9) > EXACT_TOLERANCE)[:, rigid].any(-1)
     if off_first[-1] or not off_first.any():  # a blend inside the clip leaves its first and last frames on the core
         return joints, []
-    core = rigid_core(lengths[:, rigid], poses=x)
-    if core is None:
-        return joints, []
-    true = np.median(lengths[core], 0)
+    true = np.median(lengths[~off_first], 0)  # the exact core: the frames whose bones are the first frame's
     off = (np.abs(lengths - true) / np.maximum(true, 1e-9) > EXACT_TOLERANCE)[:, rigid].any(-1)
     out, blends = x.copy(), []
     for lo, hi in blend_windows(off):
