@@ -115,4 +115,7 @@ def test_a_converted_layout_is_unblended_in_its_own_bones(humanact12):
         err = lambda y: float(np.linalg.norm(y - truth, axis=-1).mean())  # noqa: E731
         assert err(out) < share * err(given), (skeleton, err(out), err(given))
         assert report.changes[0]["repair"] == "unblended_pose"
+    transition_only = Refiner.pretrained("uestc", split="train", mode="transition")  # an anchor step: not there
+    _, report = transition_only.refine(given, return_report=True)
+    assert not any(c.get("repair") == "unblended_pose" for c in report.changes)
 

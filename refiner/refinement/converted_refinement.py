@@ -122,7 +122,7 @@ class ConvertedRefiner:
         long_enough = clips.shape[1] >= MIN_FRAMES  # shorter clips come back exactly as given
         core = bool(getattr(self.base, "rigid_core", False))  # mocap edited in places: on its exact frames' lengths
         # blended poses are read from the clip's own exact bones (bending chains held to their ends' lengths)
-        unblend = long_enough and core and mode != "transition" and blended_pose.UNBLEND
+        unblend = long_enough and (mode or self.base.mode) != "transition" and blended_pose.UNBLEND
         blends = [unblended_pose(c, self.skeleton, self.rigid_bones) if unblend else (c, []) for c in clips]
         clips = np.stack([c for c, _ in blends]).astype(clips.dtype, copy=False)
         rigid = [rigid_skeleton(c, self.skeleton, self.rigid_tolerance, bones=self.rigid_bones,
@@ -166,7 +166,7 @@ class ConvertedRefiner:
                 lengths = (f"its rigid core's {self.skeleton} bone lengths ({len(clip) - moved} exact frames kept)"
                            if moved < len(clip) else f"the clip's median {self.skeleton} bone lengths"
                            + (", drawn toward human proportions where they drift" if self.proportions is not None else ""))
-                report.changes.insert(0, {"start": 0, "stop": x.shape[-3], "step": "skeleton", "reason":
+                report.changes.insert(len(found), {"start": 0, "stop": x.shape[-3], "step": "skeleton", "reason":
                                           f"bone lengths varied by up to {100 * variation:.1f} % (std / mean; mocap: "
                                           f"0 %); {moved} frames put back on {lengths} (bones that span a bending "
                                           "chain left free)"})
