@@ -123,3 +123,39 @@ def test_train_tiny_on_a_generated_folder(tmp_path, uestc_clips, one_torch_threa
     np.testing.assert_array_equal(clips[3], before)
     # an untrained tiny model: only that it keeps the clip in place on average (metres)
     assert np.linalg.norm(refined - clips[3], axis=-1).mean() < 0.5
+
+
+@pytest.mark.real_data
+def test_train_whole_in_parallel_jobs(tmp_path, uestc_clips, one_torch_thread):
+    """`motion-refiner train --whole --jobs 2` trains every part in two processes and assembles a learned refiner
+    (timing estimator and noise residual included)."""
+    import json
+
+    from refiner import Refiner
+    from refiner.cli.main import main
+
+    clips, labels = uestc_clips
+    data = _write_folder(tmp_path / "clips", clips, labels)
+    out = tmp_path / "out"
+    args = ["train", "--whole", "--jobs", "2", "--dataset", "joints", "--data", str(data), "--config", "tiny",
+            "--device", "cpu", "--out", str(out)]
+    assert main(args) == 0
+    refiner = Refiner.load(out)
+    assert refiner.method == "learned" and refiner.skeleton == "uestc"
+    assert refiner.timing_estimator is not None and refiner.noise_residual is not None
+    assert refiner.texture_filter is not None and refiner.pose_prior is not None
+    record = json.loads((out / "train_whole.json").read_text())
+    assert set(record["job_seconds"]) == {"paper", "noise", "timing_estimator", "flaw_repairer", "texture_filter",
+                                          "pose_prior", "flaw_recognizer", "flaw_classifier"}
+    assert record["wall_seconds"] >= record["parallel_seconds"] > 0
+    logs = (out / "logs" / "noise.log").read_text()
+    assert logs.count("$ ") == 2 and logs.index("noise_filter") < logs.index("noise_residual")
+    refined = refiner.refine(clips[3])
+    assert refined.shape == clips[3].shape and np.isfinite(refined).all()
+
+
+def test_train_whole_refuses_mixed_options(tmp_path, capsys):
+    from refiner.cli.main import main
+
+    assert main(["train", "--whole", "--only", "pose_prior", "--dataset", "joints", "--data", str(tmp_path),
+                 "--out", str(tmp_path / "out")]) == 2

@@ -93,6 +93,23 @@ def test_tiny_training_installs_and_resumes(tiny_learned, humanact12):
 
 
 @pytest.mark.real_data
+def test_your_own_weights_are_looked_in_first(tiny_learned, tmp_path):
+    """``Refiner.pretrained(weights=DIR)`` (and ``bench --weights DIR``) takes DIR's sets before the shipped ones,
+    for the layouts served through them too; the sets DIR lacks are the shipped ones."""
+    _, out = tiny_learned
+    (tmp_path / "humanact12-train").symlink_to(out, target_is_directory=True)
+    tiny = Refiner.load(out).flaw_recognizer.n_parameters()
+    assert tiny != Refiner.pretrained(split="train").flaw_recognizer.n_parameters()
+    assert Refiner.pretrained(split="train", weights=tmp_path).flaw_recognizer.n_parameters() == tiny
+    assert Refiner.pretrained("uestc", split="train", weights=tmp_path).base.flaw_recognizer.n_parameters() == tiny
+    assert Refiner.pretrained(weights=tmp_path).flaw_recognizer.n_parameters() != tiny  # split "all": shipped
+    assert Refiner.pretrained("cmu_mocap", weights=tmp_path).manifest["dataset"] == "cmu_mocap"
+    from refiner.cli.main import main
+
+    assert main(["bench", "flaws", "--weights", str(tmp_path / "none")]) == 2  # not a folder
+
+
+@pytest.mark.real_data
 def test_an_optional_part_is_added_to_a_finished_refiner_leaving_its_files_alone(humanact12, tmp_path):
     from safetensors import safe_open
 

@@ -22,25 +22,32 @@ def bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true", help="tiny configuration (for tests)")
     p.add_argument("--stride", type=int, default=1, help="flaws, skeletons: keep every N-th held-out clip (skeletons default 4)")
     p.add_argument("--severity", type=int, action="append", choices=[1, 2, 3], help="flaws: only these severities")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="folder of weight sets named as the shipped ones, looked in first: DIR/humanact12-train "
+                        "(e.g. `motion-refiner train --whole --split train --out DIR/humanact12-train`) replaces the "
+                        "shipped set every suite refines with; sets it lacks are the shipped ones")
 
 
 def bench_run(args: argparse.Namespace) -> int:
     return run_benchmarks(args.suite, data=args.data, out=args.out, quick=args.quick, stride=args.stride,
-                          severities=tuple(args.severity) if args.severity else None)
+                          severities=tuple(args.severity) if args.severity else None, weights=args.weights)
 
 
 def run_benchmarks(suite: str, *, data: Path | None = None, out: Path | None = None, quick: bool = False,
-                   stride: int = 1, severities: tuple[int, ...] | None = None) -> int:
+                   stride: int = 1, severities: tuple[int, ...] | None = None, weights: Path | None = None) -> int:
     """Run ``suite`` (or ``"all"``), printing each suite's progress and section; returns the exit code 0.
 
-    With ``out`` every suite writes ``<suite>.json`` there and the sections are written as ``REPORT.md``.
+    With ``out`` every suite writes ``<suite>.json`` there and the sections are written as ``REPORT.md``. ``weights``:
+    a folder of weight sets looked in before the shipped ones (:meth:`refiner.Refiner.pretrained`).
     """
+    if weights is not None and not Path(weights).is_dir():
+        raise ValueError(f"`--weights` {weights} is not a folder (it holds weight sets such as humanact12-train/).")
     names = list(SUITES) if suite == "all" else [suite]
-    sections = []
+    sections = [] if weights is None else [f"Weights: `{weights}`, looked in before the shipped ones."]
     for name in names:
         extra = ({"stride": stride, "severities": severities} if name == "flaws"
                  else {"stride": stride} if name == "skeletons" and stride > 1 else {})
-        record = SUITES[name](data, out, quick, progress=_printer(name), **extra)
+        record = SUITES[name](data, out, quick, progress=_printer(name), weights=weights, **extra)
         section = SECTIONS[name](record)
         print(section, flush=True)
         print(flush=True)

@@ -170,23 +170,24 @@ class PipelineRefiner:
         return f"PipelineRefiner(mode={self.mode!r}{extra})"
 
 
-#: Refiners compared by ``motion-refiner bench flaws``: name -> zero-argument factory. The ``ours_*``
+#: Refiners compared by ``motion-refiner bench flaws``: name -> factory of keyword ``weights`` (a folder of weight sets
+#: looked in before the shipped ones; the baselines have none). The ``ours_*``
 #: factories load the weights trained on subjects 1-10 only (``split="train"``), since the benchmark
 #: runs on subjects 11-12; they raise (ValueError without those weights) and the bench then skips
 #: them with a note. ``ours_full`` is the default (learned) refiner; ``ours_infill`` its in-filling
 #: variant; ``ours_concepts`` the anchor-score / transition-residual pipeline with the paper's parts;
 #: ``ours_concept_snap`` the default with the concept-snap option (every anchor moved onto a concept).
-FLAW_REFINERS: dict[str, Callable[[], object]] = {
-    "identity": IdentityRefiner,
-    "savgol": SavgolRefiner,
-    "gaussian": GaussianRefiner,
-    "spline_fit": SplineFitRefiner,
-    "ours_full": lambda: PipelineRefiner("full", split="train"),
-    "ours_anchor": lambda: PipelineRefiner("anchor", split="train"),
-    "ours_transition": lambda: PipelineRefiner("transition", split="train"),
-    "ours_infill": lambda: PipelineRefiner("full", split="train", repair="infill"),
-    "ours_concepts": lambda: PipelineRefiner("full", split="train", method="concepts"),
-    "ours_concept_snap": lambda: PipelineRefiner("full", split="train", concept_snap=1.0),
+FLAW_REFINERS: dict[str, Callable[..., object]] = {
+    "identity": lambda weights=None: IdentityRefiner(),
+    "savgol": lambda weights=None: SavgolRefiner(),
+    "gaussian": lambda weights=None: GaussianRefiner(),
+    "spline_fit": lambda weights=None: SplineFitRefiner(),
+    "ours_full": lambda weights=None: PipelineRefiner("full", split="train", weights=weights),
+    "ours_anchor": lambda weights=None: PipelineRefiner("anchor", split="train", weights=weights),
+    "ours_transition": lambda weights=None: PipelineRefiner("transition", split="train", weights=weights),
+    "ours_infill": lambda weights=None: PipelineRefiner("full", split="train", repair="infill", weights=weights),
+    "ours_concepts": lambda weights=None: PipelineRefiner("full", split="train", method="concepts", weights=weights),
+    "ours_concept_snap": lambda weights=None: PipelineRefiner("full", split="train", concept_snap=1.0, weights=weights),
 }
 
 

@@ -23,11 +23,13 @@ _PAPER = {100: (0.89, "97.7%"), 200: (0.94, "98.6%"), 300: (1.08, "98.3%"), 400:
 _CLUSTERS = (2, 4, 8, 12, 16)
 
 
-def bench_concepts(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
+def bench_concepts(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
+                   progress: Progress | None = None) -> dict:
     """Segmentation speed on all HumanAct12 clips, the λ table beside the paper's Table 2, K-means.
 
     ``quick`` keeps every 40th clip. Progress events: ``"segmented"`` (the record so far, once the
-    clips are segmented at the default λ) and ``"penalty"`` (each row of ``penalties``).
+    clips are segmented at the default λ) and ``"penalty"`` (each row of ``penalties``). ``weights`` is
+    accepted like every suite's and not used (no refiner runs here).
     """
     # sklearn.cluster takes a quarter of a second to import: here, so that importing the suites
     # (``motion-refiner --help``) stays cheap

@@ -95,12 +95,13 @@ def flaw_records(clips, refiners: dict, *, severities=(2,), model=None, families
 
 @one_thread()
 def bench_flaws(data: Path | None, out: Path | None, quick: bool, *, stride: int = 1,
-                severities: tuple[int, ...] | None = None, progress: Progress | None = None) -> dict:
+                severities: tuple[int, ...] | None = None, weights: Path | None = None,
+                progress: Progress | None = None) -> dict:
     """Seeded flaws on held-out HumanAct12 clips; see the module docstring. ``stride`` keeps every
     stride-th clip; ``severities`` default (2,) (the acceptance severity), ``quick`` every 68th clip (4).
     Runs on one thread (:func:`~refiner.evaluation.bench_setup.one_thread`). Returns the record (see the
-    module docstring), written as ``flaws.json`` with ``out``; ``progress`` is accepted like every
-    suite's and not called.
+    module docstring), written as ``flaws.json`` with ``out``; ``weights``: a folder of weight sets looked in before
+    the shipped ones (``Refiner.pretrained``); ``progress`` is accepted like every suite's and not called.
     """
     # the pipeline imports torch and the baselines scipy.signal: here, so that importing the suites stays cheap
     from refiner.evaluation.baselines import FLAW_REFINERS
@@ -113,11 +114,11 @@ def bench_flaws(data: Path | None, out: Path | None, quick: bool, *, stride: int
     skipped, refiners = {}, {}
     for name, factory in FLAW_REFINERS.items():
         try:
-            refiners[name] = factory()
+            refiners[name] = factory(weights=weights)
         except Exception as e:  # an optional refiner that cannot be built is skipped, not fatal
             skipped[name] = f"{type(e).__name__}: {e}"
     try:
-        model = Refiner.pretrained("humanact12", split="train")
+        model = Refiner.pretrained("humanact12", split="train", weights=weights)
         model = model if model.flaw_repairer is not None else None
     except ValueError:
         model = None

@@ -41,12 +41,14 @@ def physical_record(motions) -> dict:
 
 
 @one_thread()
-def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
+def bench_generators(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
+                     progress: Progress | None = None) -> dict:
     """The shipped reference generators' samples before and after refinement, scored by the HumanAct12 recogniser.
 
     ``quick``: 3 samples per action, 2 replications and, for a diffusion generator, 10 sampling steps instead of
     its own (else the paper's Table 1 protocol and the generators as shipped). Progress
     event ``"row"``: ``kind``, ``label`` (generated, refined or snapped) and ``metrics`` of each generator row.
+    ``weights``: a folder of weight sets looked in before the shipped ones.
     """
     # these import torch: here, so that importing the suites (``motion-refiner --help``) stays cheap
     from refiner.reference import GENERATOR_KINDS, load_reference_generator
@@ -57,8 +59,8 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, progre
     dataset, recognizer = load_humanact12_and_recognizer(data, hidden="random")
     real = dataset.split("test")
     # as RefinedGenerator refines a generator's clips: every one through the texture filter (texture="all")
-    refiners = {"refined": Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS),
-                "snapped": Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS, concept_snap=1.0)}
+    refiners = {"refined": Refiner.pretrained("humanact12", split="train", weights=weights, **GENERATOR_OPTIONS),
+                "snapped": Refiner.pretrained("humanact12", split="train", weights=weights, **GENERATOR_OPTIONS, concept_snap=1.0)}
     # the paper's Table 1 protocol: 3,000 samples (250 per action), 20 replications
     per_action, n_rep = (3, 2) if quick else (250, 20)
     n_actions = len(dataset.action_names)

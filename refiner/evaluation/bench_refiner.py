@@ -25,12 +25,13 @@ from refiner.evaluation.physics import boundary_velocity_jump
 
 __all__ = ["bench_refiner", "bench_speed"]
 
-_WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 
 
 @one_thread()
-def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
-    """Issue-3 figures for the shipped subject-1-10 weights on held-out subjects 11-12.
+def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
+                  progress: Progress | None = None) -> dict:
+    """Issue-3 figures for the shipped subject-1-10 weights (``weights``: a folder of weight sets looked in first) on
+    held-out subjects 11-12.
 
     (a) how much real clips change, (b) velocity jumps where refined windows meet kept frames
     against real data's 99th percentile, (c) precision / recall of the anchors the refiner finds
@@ -53,7 +54,7 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, progress:
     progress = progress or ignore_progress
     test = load_bench_humanact12(data).split("test")
     clips = test.motions[:: (16 if quick else 1)]
-    model = Refiner.pretrained("humanact12", split="train")
+    model = Refiner.pretrained("humanact12", split="train", weights=weights)
     counts = model.n_parameters()
     rec = {"clips": len(clips), "parameters": counts}
 
@@ -121,7 +122,8 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, progress:
     return write_record(out, "refiner", rec)
 
 
-def bench_speed(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
+def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
+                progress: Progress | None = None) -> dict:
     """Refine latency (batch 1) and throughput (large batches), peak memory and parameters, CPU and CUDA.
 
     ``quick``: 8 clips and batches of 8 (else 64 and 256). Progress event ``"device"``: each row of
@@ -137,7 +139,7 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool, *, progress: P
     batch_size = 8 if quick else 256
     rec = {"clips": len(clips), "batch": batch_size, "devices": []}
     for device in devices:
-        model = Refiner.load(_WEIGHTS / "humanact12-train", device=device)
+        model = Refiner.pretrained("humanact12", split="train", device=device, weights=weights)
         for x in clips[:3]:
             model.refine(x)  # warm up (first calls allocate and compile kernels)
         times = []
@@ -165,5 +167,5 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool, *, progress: P
                               else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
             "peak_of": "CUDA" if device == "cuda" else "process RSS"})
         progress("device", rec["devices"][-1])
-    rec["parameters"] = Refiner.pretrained("humanact12", split="train").n_parameters()
+    rec["parameters"] = Refiner.pretrained("humanact12", split="train", weights=weights).n_parameters()
     return write_record(out, "speed", rec)

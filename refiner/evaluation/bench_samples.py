@@ -62,10 +62,12 @@ def _repaired(report) -> np.ndarray:
     return frames
 
 
-def bench_samples(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
+def bench_samples(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
+                  progress: Progress | None = None) -> dict:
     """Real Action2Motion samples before / after (see the module docstring); ``quick``: the first 5.
 
-    ``progress`` is accepted like every suite's and not called.
+    ``weights``: a folder of weight sets looked in before the shipped ones; ``progress`` is accepted like every suite's
+    and not called.
     """
     from refiner.refinement.pipeline import Refiner  # imports torch: here, so that importing the suites stays cheap
     from refiner.refinement.inputs import GENERATOR_OPTIONS
@@ -80,12 +82,12 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool, *, progress:
     if quick:
         before, labels = before[:5], labels[:5]
     # generator output, refined as RefinedGenerator refines it: every clip through the texture filter
-    refiner = Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS)
+    refiner = Refiner.pretrained("humanact12", split="train", weights=weights, **GENERATOR_OPTIONS)
     rec = sample_records(before, labels, recognizer, refiner, n_hidden=5 if quick else 20)
-    snapper = Refiner.pretrained("humanact12", split="train", **GENERATOR_OPTIONS, concept_snap=1.0)
+    snapper = Refiner.pretrained("humanact12", split="train", weights=weights, **GENERATOR_OPTIONS, concept_snap=1.0)
     snapped = sample_records(before, labels, recognizer, snapper, n_hidden=5 if quick else 20)
     rec["snapped"] = {**snapped["refined"], "frames_changed": snapped["frames_changed"]}
-    ntu = _ntu13_records(data, folder, quick)
+    ntu = _ntu13_records(data, folder, quick, weights)
     if isinstance(ntu, str):
         rec["ntu13_skipped"] = ntu
     else:
@@ -93,7 +95,7 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool, *, progress:
     return write_record(out, "samples", rec)
 
 
-def _ntu13_records(data, folder: Path, quick: bool):
+def _ntu13_records(data, folder: Path, quick: bool, weights: Path | None = None):
     """:func:`sample_records` of the 18-joint NTU13 samples with the NTU13 recogniser, or why not."""
     # these import torch: here, so that importing the suites stays cheap
     from refiner.evaluation.evaluators import load_recognizer
@@ -112,7 +114,7 @@ def _ntu13_records(data, folder: Path, quick: bool):
     before = convert("action2motion", np.load(path), representation="xyz", recenter=True, skeleton="uestc")
     if quick:
         before, labels = before[:5], labels[:5]
-    rec = sample_records(before, labels, recognizer, Refiner.pretrained("uestc", split="train", **GENERATOR_OPTIONS),
+    rec = sample_records(before, labels, recognizer, Refiner.pretrained("uestc", split="train", weights=weights, **GENERATOR_OPTIONS),
                          n_hidden=5 if quick else 20, actions=[None] * len(before))
     rec["clips"] = len(before)
     return rec

@@ -25,11 +25,13 @@ __all__ = ["bench_sanity"]
 
 
 @one_thread()
-def bench_sanity(data: Path | None, out: Path | None, quick: bool, *, progress: Progress | None = None) -> dict:
+def bench_sanity(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
+                 progress: Progress | None = None) -> dict:
     """Real held-out clips through the evaluation protocol: FID near zero and the recogniser's accuracy.
 
     ``quick``: 3 replications of 300 crops (else 20 of 1,000). Progress event ``"comparison"``: the
-    comparison's ``label``, ``metrics`` and ``seconds``, as each one is done.
+    comparison's ``label``, ``metrics`` and ``seconds``, as each one is done. ``weights`` is accepted like every suite's and not
+    used (no refiner runs here).
     """
     progress = progress or ignore_progress
     dataset, recognizer = load_humanact12_and_recognizer(data, hidden="random")

@@ -65,7 +65,7 @@ def _row(model, clean, flawed: dict) -> tuple[dict, dict]:
     return row, refined
 
 
-def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = "train") -> dict:
+def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = "train", weights: Path | None = None) -> dict:
     """Per skeleton: ``clean_mpjpe_change_cm``, ``clean_clips_changed`` (share), ``removed_pct`` per
     family and ``mean_removed_pct``, for ``clips`` (Motions on the 24 HumanAct12 joints)."""
     from refiner.refinement.pipeline import Refiner  # imports torch: here, so that importing the suites stays cheap
@@ -73,7 +73,7 @@ def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = 
     flawed = _flawed(clips, list(families or FLAW_FAMILIES))
     rec = {}
     for name in skeletons:
-        model = Refiner.pretrained(name, split=split)
+        model = Refiner.pretrained(name, split=split, weights=weights)
 
         def to(x):
             return np.asarray(x if name == "humanact12" else convert(x, "humanact12", name), np.float32)
@@ -84,7 +84,7 @@ def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = 
 
 
 def native_records(data: Path | None, *, families=None, stride: int = 1, split: str = "train",
-                   n_replications: int = 20) -> dict:
+                   n_replications: int = 20, weights: Path | None = None) -> dict:
     """Per skeleton of :data:`NATIVE` with shipped weights: the row of :func:`skeleton_records` on its
     own dataset's held-out clips, plus ``accuracy_pct`` of its recogniser on ``clean``, ``flawed`` and
     ``refined`` clips (flawed / refined: mean over families) and the weights' ``licence``."""
@@ -100,7 +100,7 @@ def native_records(data: Path | None, *, families=None, stride: int = 1, split: 
         test = load_cmu_mocap(None if data is None else Path(data) / "cmu_mocap" / "cmu_mocap_labeled_joints.npz")
         clips = [m.with_joints(m.joints[:NATIVE_FRAMES]) for m in test.split("test") if len(m.joints) >= NATIVE_FRAMES]
         clips = clips[::stride]
-        model = Refiner.pretrained(name, split=split)
+        model = Refiner.pretrained(name, split=split, weights=weights)
         flawed = _flawed(clips, list(families or FLAW_FAMILIES))
         row, refined = _row(model, [m.joints for m in clips], flawed)
         recognizer = load_recognizer(dataset, directory=None if data is None else Path(data).parent / "evaluators")
@@ -121,11 +121,11 @@ def native_records(data: Path | None, *, families=None, stride: int = 1, split: 
 
 @one_thread()
 def bench_skeletons(data: Path | None, out: Path | None, quick: bool, *, stride: int = 4,
-                    progress: Progress | None = None) -> dict:
+                    weights: Path | None = None, progress: Progress | None = None) -> dict:
     """One row per skeleton (see the module docstring); ``quick``: 4 clips, 2 families, 2 skeletons.
 
-    Returns the record, written as ``skeletons.json`` with ``out``; ``progress`` is accepted like every
-    suite's and not called.
+    Returns the record, written as ``skeletons.json`` with ``out``; ``weights``: a folder of weight sets looked in before
+    the shipped ones; ``progress`` is accepted like every suite's and not called.
     """
     test = load_bench_humanact12(data).split("test")
     stride = 90 if quick else stride  # quick: 4 clips
@@ -133,8 +133,9 @@ def bench_skeletons(data: Path | None, out: Path | None, quick: bool, *, stride:
     skeletons = SKELETONS[:2] if quick else SKELETONS
     families = ("frozen_transition", "foot_sliding") if quick else None
     t0 = time.perf_counter()
-    rec = skeleton_records(clips, skeletons, families=families)
-    native = native_records(data, families=families, stride=40 if quick else 2, n_replications=2 if quick else 20)
+    rec = skeleton_records(clips, skeletons, families=families, weights=weights)
+    native = native_records(data, families=families, stride=40 if quick else 2, n_replications=2 if quick else 20,
+                            weights=weights)
     seconds = time.perf_counter() - t0
     return write_record(out, "skeletons", {"clips": len(clips), "stride": stride, "seconds": seconds, "skeletons": rec,
                                            "native": native})

@@ -262,22 +262,22 @@ class Refiner:
                    manifest=manifest)
 
     @classmethod
-    def pretrained(cls, skeleton: str = "humanact12", *, split: str = "all", device: str = "cpu",
+    def pretrained(cls, skeleton: str = "humanact12", *, split: str = "all", device: str = "cpu", weights=None,
                    **kwargs) -> "Refiner | ConvertedRefiner":
         """The shipped weights: ``split="all"`` (default, all subjects) or ``"train"`` (subjects 1-10, for benchmarks).
 
-        Weights are loaded and verified against their manifest on first use; every call returns an
-        independent copy, so changing one (:meth:`calibrate`, a threshold) changes no other. Each weight
-        set's licence is in its manifest (:meth:`shipped` lists them): HumanAct12's are for academic,
-        non-commercial use only; ``cmu_mocap``'s (the learned steps, trained on the CMU subset alone; train
-        split only, which ``split="all"`` falls back to) for all uses. A skeleton without weights of its own
-        that :func:`refiner.core.skeletons.convert` connects with HumanAct12's (``uestc``, ``humanml3d``)
-        gets a :class:`~refiner.refinement.converted_refinement.ConvertedRefiner` running the HumanAct12 weights.
-        """
+        Weights are loaded and verified against their manifest on first use; every call returns an independent copy, so
+        changing one (:meth:`calibrate`, a threshold) changes no other. Each weight set's licence is in its manifest
+        (:meth:`shipped` lists them): HumanAct12's are for academic, non-commercial use only; ``cmu_mocap``'s (the learned
+        steps, trained on the CMU subset alone; train split only, which ``split="all"`` falls back to) for all uses. A
+        skeleton without weights of its own that :func:`refiner.core.skeletons.convert` connects with HumanAct12's
+        (``uestc``, ``humanml3d``) gets a :class:`~refiner.refinement.converted_refinement.ConvertedRefiner` running the
+        HumanAct12 weights. ``weights``: a folder of weight sets named as the shipped ones (``humanact12-train/``: your
+        own training), looked in first."""
         for option in ("concept_snap", "misread_snap"):  # one cached refiner per strength, however written
             kwargs.update({option: snap} if (snap := check_strength(kwargs.pop(option, 0.0), option)) else {})
         with thread_limits(1):  # copying the tensors on one thread: 0.07 s; on two, under load, 0.4-0.6 s
-            return copy.deepcopy(_shared_pretrained(cls, skeleton, split, device, kwargs))
+            return copy.deepcopy(_shared_pretrained(cls, skeleton, split, device, kwargs, weights))
 
     @staticmethod
     def shipped() -> list[dict]:
@@ -376,25 +376,25 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
     return model.refine(seq, action=action, mode=mode, return_report=return_report)
 
 
-def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict) -> "Refiner | ConvertedRefiner":
-    """The shipped refiner for these arguments, loaded once and cached (see :meth:`Refiner.pretrained`)."""
+def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict, weights=None) -> "Refiner | ConvertedRefiner":
+    """The weights for these arguments (in ``weights``, else shipped), loaded once and cached (see :meth:`Refiner.pretrained`)."""
     name = f"{get_skeleton(skeleton).name}" + ("" if split == "all" else f"-{split}")
-    folder = _WEIGHTS / name
-    if not (folder / "manifest.json").is_file() and split == "all" and (_WEIGHTS / f"{name}-train" / "manifest.json").is_file():
-        return _shared_pretrained(cls, skeleton, "train", device, kwargs)  # a skeleton that ships train-split weights only
-    if not (folder / "manifest.json").is_file() and converts_with_humanact12(skeleton):
+    found = [r / n for n in (name, f"{name}-train") for r in [*([Path(weights)] if weights else []), _WEIGHTS] if (r / n / "manifest.json").is_file()]
+    if found and found[0].name != name and split == "all":  # weights of a train split only
+        return _shared_pretrained(cls, skeleton, "train", device, kwargs, weights)
+    if not found and converts_with_humanact12(skeleton):
         kwargs = dict(kwargs)
         tolerance = kwargs.pop("rigid_tolerance", 0.005)  # on the clip's own bones, not the estimated ones
-        base = _shared_pretrained(cls, "humanact12", split, device, {**kwargs, "rigid_tolerance": float("inf")})
+        base = _shared_pretrained(cls, "humanact12", split, device, {**kwargs, "rigid_tolerance": float("inf")}, weights)
         record = base.manifest.get("learned", {}).get("converted_bone_proportions", {}).get(get_skeleton(skeleton).name)
         use = record is not None and base.rigid_lengths == "proportions"
         return ConvertedRefiner(base, skeleton, rigid_tolerance=tolerance,
                                 proportions=BoneProportions.from_dict(record) if use else None)
-    if not (folder / "manifest.json").is_file():
+    if not found or found[0].name != name:
         known = [f"{w['folder']} ({w['skeleton']}, {w['split']})" for w in refiner_weight_sets(_WEIGHTS)]
-        raise ValueError(f"no shipped weights for skeleton {skeleton!r}, split {split!r}; shipped: "
-                         f"{', '.join(known) or 'none'} (licences: Refiner.shipped()).")
-    key = (name, device, tuple(sorted(kwargs.items())))
+        raise ValueError(f"no weights for skeleton {skeleton!r}, split {split!r}{f' in {weights} or' if weights else ''} shipped; "
+                         f"shipped: {', '.join(known) or 'none'} (licences: Refiner.shipped()).")
+    key = (str(found[0]), device, tuple(sorted(kwargs.items())))
     if key not in _PRETRAINED:
-        _PRETRAINED[key] = cls.load(folder, device=device, **kwargs)
+        _PRETRAINED[key] = cls.load(found[0], device=device, **kwargs)
     return _PRETRAINED[key]

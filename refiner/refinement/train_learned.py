@@ -61,27 +61,36 @@ CLIP_RATE = 0.03
 
 log = logging.getLogger(__name__)
 
-#: "default" fits in about 30 minutes per network on one CPU core; "tiny" trains in seconds for tests.
+#: Epochs of the "fast" configuration (the defaults: 40, 60 / 80, 100, 24, 200). The small parts (flaw classifier, noise
+#: filter and residual, amplitude) and the paper's keep their schedules: a few minutes in all.
+FAST_EPOCHS = {"flaw_networks": 20, "corrections": 30, "pose_prior": 50, "texture_filter": 12, "timing_estimator": 90}
+
+#: "default" fits in about 30 minutes per network on one CPU core; "fast" is every part's schedule cut to about half
+#: (the whole refiner in under an hour on 2 CPU cores: ``motion-refiner train --whole --jobs 2 --config fast``);
+#: "tiny" trains in seconds for tests.
 LEARNED_CONFIGS = {
     "default": dict(d_model=128, n_layers=3, n_heads=4, ffn_dim=256,
                     schedule=dict(n_epochs=40, steps_per_epoch=200, batch_size=64)),
+    "fast": dict(d_model=128, n_layers=3, n_heads=4, ffn_dim=256,
+                 schedule=dict(n_epochs=FAST_EPOCHS["flaw_networks"], steps_per_epoch=200, batch_size=64)),
     "tiny": dict(d_model=16, n_layers=1, n_heads=2, ffn_dim=16, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8)),
 }
 #: The flaw classifier's settings (about 2 minutes on one CPU core) and its tiny test version; ``schedule``
 #: holds the fields that differ from the estimator's default schedule.
-CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()),
+CLASSIFIER_CONFIGS = {"default": dict(schedule=dict()), "fast": dict(schedule=dict()),
                       "tiny": dict(hidden=8, n_layers=1, copies=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 #: The settings of the two convolution networks that correct frames, the flaw denoiser (about 38 minutes on
 #: one CPU core) and the motion in-filler (about 40), and their tiny test version.
-CORRECTION_CONFIGS = {"default": dict(schedule=dict()),
+CORRECTION_CONFIGS = {"default": dict(schedule=dict()), "fast": dict(schedule=dict(n_epochs=FAST_EPOCHS["corrections"])),
                       "tiny": dict(hidden=8, n_layers=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 LEARNED_PARTS = ("flaw_classifier", "flaw_recognizer", "flaw_repairer", "noise_filter", "amplitude_restorer", "pose_prior",
                  "texture_filter")
 #: The pose prior's settings (100 epochs of 200 steps, about 22 minutes on one CPU core) and its tiny test version.
-POSE_PRIOR_CONFIGS = {"default": dict(schedule=dict()),
+POSE_PRIOR_CONFIGS = {"default": dict(schedule=dict()), "fast": dict(schedule=dict(n_epochs=FAST_EPOCHS["pose_prior"])),
                       "tiny": dict(hidden=8, n_layers=1, crop=16, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 #: The texture filter's settings (about 25 minutes on one CPU core) and its tiny test version.
 TEXTURE_FILTER_CONFIGS = {"default": dict(schedule=dict()),
+                          "fast": dict(schedule=dict(n_epochs=FAST_EPOCHS["texture_filter"])),
                           "tiny": dict(channels=8, dilations=(1,), crop=16, schedule=dict(n_epochs=2, steps_per_epoch=2,
                                                                                          batch_size=8))}
 #: The pose prior corrects frames of drifting skeletons where it would move them further than this quantile of its
@@ -97,11 +106,11 @@ NOISE_FILTER_CONFIGS = {"default": {}, "tiny": dict(half_width=1, copies=1, rigi
 #: they are calibrated and installed with the others.
 OPTIONAL_PARTS = ("flaw_denoiser", "motion_infiller", "timing_estimator", "noise_residual")
 #: The timing estimator's settings (about 20 minutes on one CPU core) and its tiny test version.
-TIMING_CONFIGS = {"default": dict(schedule=dict()),
+TIMING_CONFIGS = {"default": dict(schedule=dict()), "fast": dict(schedule=dict(n_epochs=FAST_EPOCHS["timing_estimator"])),
                   "tiny": dict(hidden=8, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 #: The noise residual's settings (behind the noise filter of the same run, else of ``base``: about 2 minutes on one CPU
 #: core) and its tiny test version.
-NOISE_RESIDUAL_CONFIGS = {"default": dict(schedule=dict()),
+NOISE_RESIDUAL_CONFIGS = {"default": dict(schedule=dict()), "fast": dict(schedule=dict()),
                           "tiny": dict(hidden=8, copies=1, schedule=dict(n_epochs=2, steps_per_epoch=2, batch_size=8))}
 _CLASSES = {"flaw_classifier": FlawClassifier, "flaw_recognizer": FlawRecognizer, "flaw_repairer": FlawRepairer,
             "flaw_denoiser": FlawDenoiser, "motion_infiller": MotionInfiller, "timing_estimator": TimingEstimator,
