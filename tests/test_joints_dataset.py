@@ -159,3 +159,4 @@ def test_train_whole_refuses_mixed_options(tmp_path, capsys):
 
     assert main(["train", "--whole", "--only", "pose_prior", "--dataset", "joints", "--data", str(tmp_path),
                  "--out", str(tmp_path / "out")]) == 2
+    assert "`--whole` trains every part itself" in capsys.readouterr().err

@@ -1,4 +1,5 @@
 """Parallel training jobs: which parts, in which order, and how failures are reported."""
+import time
 from pathlib import Path
 
 import pytest
@@ -22,8 +23,10 @@ def test_jobs_cover_every_part_longest_first(tmp_path):
 
 def test_run_jobs_runs_in_parallel_and_names_a_failure(tmp_path):
     ok = [TrainJob(f"help{k}", (("train", "--help"),)) for k in range(2)]
+    t0 = time.perf_counter()
     seconds = run_jobs(ok, 2, tmp_path / "logs", poll=0.1)
     assert set(seconds) == {"help0", "help1"}
+    assert time.perf_counter() - t0 < 0.9 * sum(seconds.values())  # side by side, not one after the other
     assert "--whole" in (tmp_path / "logs" / "help1.log").read_text()
     bad = [TrainJob("broken", (("train", "--no-such-option"),)), *ok[:1]]
     with pytest.raises(RuntimeError, match="'broken' failed"):

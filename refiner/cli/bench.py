@@ -10,6 +10,8 @@ import argparse
 from pathlib import Path
 
 from refiner.cli.bench_tables import PROGRESS, SECTIONS
+from refiner.core.manifest import refiner_weight_sets
+from refiner.evaluation.bench_setup import write_record
 from refiner.evaluation.bench import SUITES
 
 __all__ = ["bench_arguments", "bench_run", "run_benchmarks"]
@@ -40,14 +42,21 @@ def run_benchmarks(suite: str, *, data: Path | None = None, out: Path | None = N
     With ``out`` every suite writes ``<suite>.json`` there and the sections are written as ``REPORT.md``. ``weights``:
     a folder of weight sets looked in before the shipped ones (:meth:`refiner.Refiner.pretrained`).
     """
-    if weights is not None and not Path(weights).is_dir():
-        raise ValueError(f"`--weights` {weights} is not a folder (it holds weight sets such as humanact12-train/).")
+    if weights is not None:
+        found = refiner_weight_sets(weights)
+        sets = [w["folder"] for w in found if w["folder"] == w["skeleton"] + ("" if w["split"] == "all" else f"-{w['split']}")]
+        if not sets:  # else every suite would quietly refine with the shipped weights
+            raise ValueError(f"`--weights` {weights} holds no weight set named for its skeleton and split (found: "
+                             f"{', '.join(w['folder'] for w in found) or 'none'}): give the folder that holds your set "
+                             "as humanact12-train/ (a refiner folder with its manifest.json).")
     names = list(SUITES) if suite == "all" else [suite]
-    sections = [] if weights is None else [f"Weights: `{weights}`, looked in before the shipped ones."]
+    sections = [] if weights is None else [f"Weights: `{weights}` ({', '.join(sets)}), looked in before the shipped ones."]
     for name in names:
         extra = ({"stride": stride, "severities": severities} if name == "flaws"
                  else {"stride": stride} if name == "skeletons" and stride > 1 else {})
         record = SUITES[name](data, out, quick, progress=_printer(name), weights=weights, **extra)
+        if weights is not None:  # the record says whose weights it measured
+            record = write_record(out, name, {**record, "weights": {"folder": str(Path(weights).resolve()), "sets": sets}})
         section = SECTIONS[name](record)
         print(section, flush=True)
         print(flush=True)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 from pathlib import Path
 
 from refiner.io.datasets import load_dataset
@@ -47,6 +48,8 @@ def train_run(args: argparse.Namespace) -> int:
     from refiner.refinement.train_refiner import train_refiner
 
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if args.whole and (args.learned or args.only is not None or args.base is not None):
+        raise ValueError("`--whole` trains every part itself: it takes neither --learned, --only nor --base.")
     dataset = load_dataset(args.dataset, args.data, skeleton=args.skeleton)
     if args.whole:
         return _train_whole(args, dataset)
@@ -77,14 +80,16 @@ def train_run(args: argparse.Namespace) -> int:
 def _train_whole(args: argparse.Namespace, dataset) -> int:
     from refiner.refinement.train_whole import train_whole_refiner
 
-    if args.learned or args.only is not None or args.base is not None:
-        raise ValueError("`--whole` trains every part itself: it takes neither --learned, --only nor --base.")
     common = ("--dataset", args.dataset, "--split", args.split, "--config", args.config, "--seed", str(args.seed),
               "--device", args.device, *(("--data", str(args.data)) if args.data is not None else ()),
               *(("--skeleton", args.skeleton) if args.skeleton is not None else ()),
               *(("--max-seconds", str(args.max_seconds)) if args.max_seconds is not None else ()))
-    refiner = train_whole_refiner(dataset, args.out, common, split=args.split, n_jobs=args.jobs, config=args.config,
-                                  random_state=args.seed, device=args.device)
+    try:
+        refiner = train_whole_refiner(dataset, args.out, common, split=args.split, n_jobs=args.jobs, config=args.config,
+                                      random_state=args.seed, device=args.device)
+    except RuntimeError as e:  # a job failed: its log says why, and a rerun resumes
+        print(f"motion-refiner train: error: {e}", file=sys.stderr)
+        return 1
     record = (args.out / "train_whole.json").read_text()
     print(f"whole refiner written to {args.out} (flaw threshold {refiner.flaw_recognizer.threshold_:.3f}); {record}")
     return 0

@@ -24,6 +24,7 @@ __all__ = [
     "read_generator_manifest",
     "read_refiner_manifest",
     "refiner_weight_sets",
+    "weight_set_folders",
     "write_manifest",
 ]
 
@@ -172,6 +173,12 @@ def _check_type(manifest: dict, key: str, kind: type, where: str):
 def _is_number(x) -> bool:
     """A JSON number that is not NaN (infinity allowed: an open upper bin)."""
     return isinstance(x, (int, float)) and not isinstance(x, bool) and not math.isnan(x)
+
+
+def weight_set_folders(name: str, roots) -> list[Path]:
+    """The folders ``root/name`` then ``root/name-train`` that hold a manifest, for each of ``roots`` in turn within each
+    name (a user's folder of weight sets before the shipped one; a skeleton that ships a train split only falls back)."""
+    return [Path(root) / n for n in (name, f"{name}-train") for root in roots if (Path(root) / n / "manifest.json").is_file()]
 
 
 def refiner_weight_sets(weights: str | os.PathLike) -> list[dict]:

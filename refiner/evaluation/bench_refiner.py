@@ -19,12 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from refiner.concepts.segmentation import segment
+from refiner.core.manifest import weight_set_folders
 from refiner.evaluation.bench_setup import Progress, ignore_progress, load_bench_humanact12, one_thread, write_record
 from refiner.evaluation.flaws import corrupt
 from refiner.evaluation.physics import boundary_velocity_jump
 
 __all__ = ["bench_refiner", "bench_speed"]
-
 
 
 @one_thread()
@@ -131,7 +131,7 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Pa
     """
     import torch  # here, not at the top: see bench_refiner
 
-    from refiner.refinement.pipeline import Refiner
+    from refiner.refinement.pipeline import _WEIGHTS, Refiner
 
     progress = progress or ignore_progress
     clips = [m.joints[:60] for m in load_bench_humanact12(data).split("test") if m.n_frames >= 60][: (8 if quick else 64)]
@@ -139,7 +139,9 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Pa
     batch_size = 8 if quick else 256
     rec = {"clips": len(clips), "batch": batch_size, "devices": []}
     for device in devices:
-        model = Refiner.pretrained("humanact12", split="train", device=device, weights=weights)
+        # loaded afresh, not a copy of a cached refiner: the peak memory is one refiner's
+        model = Refiner.load(weight_set_folders("humanact12-train", [weights, _WEIGHTS] if weights else [_WEIGHTS])[0],
+                             device=device)
         for x in clips[:3]:
             model.refine(x)  # warm up (first calls allocate and compile kernels)
         times = []

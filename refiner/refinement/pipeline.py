@@ -18,7 +18,7 @@ import numpy as np
 
 from refiner.concepts.anchors import AnchorConcepts
 from refiner.concepts.transitions import TransitionGenerator
-from refiner.core.manifest import file_sha256, read_refiner_manifest, refiner_weight_sets, write_manifest
+from refiner.core.manifest import file_sha256, read_refiner_manifest, refiner_weight_sets, weight_set_folders, write_manifest
 from refiner.core.motion import Motion
 from refiner.core.output_kind import like_input
 from refiner.core.skeletons import BoneProportions, get_skeleton
@@ -379,7 +379,7 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
 def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict, weights=None) -> "Refiner | ConvertedRefiner":
     """The weights for these arguments (in ``weights``, else shipped), loaded once and cached (see :meth:`Refiner.pretrained`)."""
     name = f"{get_skeleton(skeleton).name}" + ("" if split == "all" else f"-{split}")
-    found = [r / n for n in (name, f"{name}-train") for r in [*([Path(weights)] if weights else []), _WEIGHTS] if (r / n / "manifest.json").is_file()]
+    found = weight_set_folders(name, [weights, _WEIGHTS] if weights else [_WEIGHTS])
     if found and found[0].name != name and split == "all":  # weights of a train split only
         return _shared_pretrained(cls, skeleton, "train", device, kwargs, weights)
     if not found and converts_with_humanact12(skeleton):
@@ -392,9 +392,9 @@ def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict
                                 proportions=BoneProportions.from_dict(record) if use else None)
     if not found or found[0].name != name:
         known = [f"{w['folder']} ({w['skeleton']}, {w['split']})" for w in refiner_weight_sets(_WEIGHTS)]
-        raise ValueError(f"no weights for skeleton {skeleton!r}, split {split!r}{f' in {weights} or' if weights else ''} shipped; "
-                         f"shipped: {', '.join(known) or 'none'} (licences: Refiner.shipped()).")
-    key = (str(found[0]), device, tuple(sorted(kwargs.items())))
+        raise ValueError(f"no weights for skeleton {skeleton!r}, split {split!r}{f' in {weights}' if weights else ''} or among the "
+                         f"shipped ones: {', '.join(known) or 'none'} (licences: Refiner.shipped()).")
+    key = (str(found[0].resolve()), device, tuple(sorted(kwargs.items())))
     if key not in _PRETRAINED:
         _PRETRAINED[key] = cls.load(found[0], device=device, **kwargs)
     return _PRETRAINED[key]

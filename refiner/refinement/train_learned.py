@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import logging
 import shutil
+import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -288,6 +289,7 @@ def train_learned_refiner(dataset: MotionDataset, out: str | Path, *, split: str
         return add_optional_part(parts[only], only, dataset, out, split=split, base=base)
     if only is not None:
         return None
+    parts = {name: as_stored(name, part) for name, part in parts.items()}
     thresholds = calibrate_learned(parts, dataset, split=split)  # the parts keep their own thresholds
     kept = {k: thresholds[k] for k in (NATURAL_BONES_KEY, SKATING_KEY, AGREED_KEY) if k in thresholds}
     base = _default_base(dataset, split) if base is None else base
@@ -327,9 +329,7 @@ def add_optional_part(part, name: str, dataset: MotionDataset, out: str | Path, 
     clips = [data.motions[i].joints for i in np.flatnonzero(calibration_split(data.subjects))]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    if name in STORED_INT8:  # calibrated as it will be stored: int8 codes move its outputs a little
-        part.save(out / f"{name}.safetensors", int8=True)
-        part = type(part).load(out / f"{name}.safetensors")
+    part = as_stored(name, part)
     if name == "timing_estimator":
         part.calibrate(clips, clip_rate=TIMING_CLIP_RATE)
     elif name == "flaw_denoiser":
@@ -342,6 +342,16 @@ def add_optional_part(part, name: str, dataset: MotionDataset, out: str | Path, 
     info = {k: v for k, v in json.loads(log_path.read_text()).items() if k != "history"} if log_path.is_file() else {}
     install_part(out, name, part, info=info)
     return Refiner.load(out)
+
+
+def as_stored(name: str, part):
+    """``part`` as the saved refiner will hold it, to be calibrated so: through int8 codes if ``name`` is in
+    :data:`STORED_INT8` (they move its outputs a little), else itself."""
+    if name not in STORED_INT8:
+        return part
+    with tempfile.TemporaryDirectory() as tmp:
+        part.save(Path(tmp) / f"{name}.safetensors", int8=True)
+        return type(part).load(Path(tmp) / f"{name}.safetensors")
 
 
 def bone_proportion_records(data: MotionDataset) -> dict:

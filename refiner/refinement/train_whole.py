@@ -49,7 +49,8 @@ def whole_refiner_jobs(out: Path, common: tuple[str, ...]) -> list[TrainJob]:
 def run_jobs(jobs: list[TrainJob], n_jobs: int, log_dir: Path, *, threads: int = 1, poll: float = 2.0) -> dict:
     """Run ``jobs`` in ``n_jobs`` parallel processes (``threads`` torch / BLAS threads each), in the given order,
     each to ``log_dir/<name>.log``. Returns ``{name: seconds}``; a ``RuntimeError`` names the first job that failed
-    (the others are left to finish, so their parts are kept for a rerun)."""
+    (the others are left to finish, so their parts are kept for a rerun). Interrupted (Ctrl-C, an error here), it
+    stops the processes it started before it returns: no trainer is left running on its own."""
     if n_jobs < 1:
         raise ValueError(f"`jobs` must be a positive int; got {n_jobs}.")
     log_dir.mkdir(parents=True, exist_ok=True)
@@ -57,38 +58,48 @@ def run_jobs(jobs: list[TrainJob], n_jobs: int, log_dir: Path, *, threads: int =
     queue, running, seconds, failed = list(jobs), {}, {}, []
 
     def start(job: TrainJob, step: int):
-        handle = open(log_dir / f"{job.name}.log", "a")
         cmd = [sys.executable, "-m", "refiner", *job.commands[step]]
-        handle.write(f"$ {' '.join(cmd)}\n")
-        handle.flush()
-        proc = subprocess.Popen(cmd, stdout=handle, stderr=subprocess.STDOUT, env=env)
-        return proc, handle
+        with open(log_dir / f"{job.name}.log", "a") as handle:  # the child keeps its own copy of the descriptor
+            handle.write(f"$ {' '.join(cmd)}\n")
+            handle.flush()
+            return subprocess.Popen(cmd, stdout=handle, stderr=subprocess.STDOUT, env=env)
 
-    while queue or running:
-        while queue and len(running) < n_jobs and not failed:
-            job = queue.pop(0)
-            log.info("started %s", job.name)
-            running[job.name] = (job, 0, time.perf_counter(), *start(job, 0))
-        time.sleep(poll)
-        for name, (job, step, t0, proc, handle) in list(running.items()):
-            if proc.poll() is None:
-                continue
-            handle.close()
-            del running[name]
-            if proc.returncode != 0:
-                failed.append(name)
-                log.error("%s failed (exit %d): see %s", name, proc.returncode, log_dir / f"{name}.log")
-            elif step + 1 < len(job.commands):
-                running[name] = (job, step + 1, t0, *start(job, step + 1))
-            else:
-                seconds[name] = round(time.perf_counter() - t0, 1)
-                log.info("finished %s in %.1f min", name, seconds[name] / 60)
-        if failed and not running:
-            break
+    try:
+        _run_queue(queue, running, seconds, failed, n_jobs, start, poll)
+    except BaseException:
+        for _, _, _, proc in running.values():
+            proc.terminate()
+        for _, _, _, proc in running.values():
+            proc.wait()
+        raise
     if failed:
         raise RuntimeError(f"training job {failed[0]!r} failed: see {log_dir / (failed[0] + '.log')}; "
                            "rerun the same command to resume from the finished parts.")
     return seconds
+
+
+def _run_queue(queue, running, seconds, failed, n_jobs, start, poll) -> None:
+    """:func:`run_jobs`' loop: start jobs while there is room, move each on to its next command or record it."""
+    while queue or running:
+        while queue and len(running) < n_jobs and not failed:
+            job = queue.pop(0)
+            log.info("started %s", job.name)
+            running[job.name] = (job, 0, time.perf_counter(), start(job, 0))
+        time.sleep(poll)
+        for name, (job, step, t0, proc) in list(running.items()):
+            if proc.poll() is None:
+                continue
+            del running[name]
+            if proc.returncode != 0:
+                failed.append(name)
+                log.error("%s failed (exit %d): see its log", name, proc.returncode)
+            elif step + 1 < len(job.commands) and not failed:
+                running[name] = (job, step + 1, t0, start(job, step + 1))
+            elif step + 1 == len(job.commands):
+                seconds[name] = round(time.perf_counter() - t0, 1)
+                log.info("finished %s in %.1f min", name, seconds[name] / 60)
+        if failed and not running:
+            break
 
 
 def train_whole_refiner(dataset, out: str | Path, common: tuple[str, ...], *, split: str = "all", n_jobs: int = 2,
