@@ -63,8 +63,8 @@ CLIP_RATE = 0.03
 log = logging.getLogger(__name__)
 
 #: Epochs of the "fast" configuration (the defaults: 40, 60 / 80, 100, 24, 200). The small parts (flaw classifier, noise
-#: filter and residual, amplitude) and the paper's keep their schedules: a few minutes in all.
-FAST_EPOCHS = {"flaw_networks": 20, "corrections": 30, "pose_prior": 50, "texture_filter": 12, "timing_estimator": 90}
+#: filter and residual, amplitude) keep their schedules: a few minutes in all (the paper's: ``train_refiner.CONFIGS``).
+FAST_EPOCHS = {"flaw_networks": 16, "corrections": 30, "pose_prior": 40, "texture_filter": 10, "timing_estimator": 80}
 
 #: "default" fits in about 30 minutes per network on one CPU core; "fast" is every part's schedule cut to about half
 #: (the whole refiner in under an hour on 2 CPU cores: ``motion-refiner train --whole --jobs 2 --config fast``);

@@ -20,10 +20,10 @@ __all__ = ["TrainJob", "whole_refiner_jobs", "run_jobs", "train_whole_refiner"]
 
 log = logging.getLogger(__name__)
 
-#: Core-minutes each job took with the default configuration on a 2-core CPU (HumanAct12, train split): the order in
-#: which jobs start (longest first keeps the last process from running alone for long).
-JOB_MINUTES = {"timing_estimator": 45, "flaw_repairer": 42, "texture_filter": 28, "pose_prior": 22,
-               "flaw_recognizer": 19, "paper": 5, "flaw_classifier": 3, "noise": 2}
+#: Core-minutes each job takes with the "fast" configuration on a 2-core CPU, two jobs at a time (HumanAct12, train
+#: split): the order in which jobs start (longest first keeps the last one from running alone for long).
+JOB_MINUTES = {"timing_estimator": 27, "flaw_repairer": 16, "paper": 15, "flaw_recognizer": 12, "pose_prior": 12,
+               "texture_filter": 8, "noise": 3, "flaw_classifier": 2}
 
 
 @dataclass(frozen=True)
