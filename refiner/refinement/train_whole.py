@@ -22,8 +22,8 @@ log = logging.getLogger(__name__)
 
 #: Core-minutes each job takes with the "fast" configuration on a 2-core CPU, two jobs at a time (HumanAct12, train
 #: split): the order in which jobs start (longest first keeps the last one from running alone for long).
-JOB_MINUTES = {"timing_estimator": 27, "flaw_repairer": 16, "paper": 15, "flaw_recognizer": 12, "pose_prior": 12,
-               "texture_filter": 8, "noise": 3, "flaw_classifier": 2}
+JOB_MINUTES = {"paper": 30, "timing_estimator": 22, "flaw_repairer": 14, "flaw_recognizer": 12, "pose_prior": 11,
+               "texture_filter": 7, "noise": 3, "flaw_classifier": 2}
 
 
 @dataclass(frozen=True)
