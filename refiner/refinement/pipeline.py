@@ -392,8 +392,8 @@ def _shared_pretrained(cls, skeleton: str, split: str, device: str, kwargs: dict
                                 proportions=BoneProportions.from_dict(record) if use else None)
     if not found or found[0].name != name:
         known = [f"{w['folder']} ({w['skeleton']}, {w['split']})" for w in refiner_weight_sets(_WEIGHTS)]
-        raise ValueError(f"no weights for skeleton {skeleton!r}, split {split!r}{f' in {weights}' if weights else ''} or among the "
-                         f"shipped ones: {', '.join(known) or 'none'} (licences: Refiner.shipped()).")
+        raise ValueError(f"no shipped weights for skeleton {skeleton!r}, split {split!r}; shipped: {', '.join(known) or 'none'} "
+                         f"(licences: Refiner.shipped()){f'; none in {weights} either' if weights else ''}.")
     key = (str(found[0].resolve()), device, tuple(sorted(kwargs.items())))
     if key not in _PRETRAINED:
         _PRETRAINED[key] = cls.load(found[0], device=device, **kwargs)
