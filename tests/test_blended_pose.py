@@ -5,8 +5,8 @@ import pytest
 import refiner
 import refiner.refinement.blended_pose as blended_pose
 from refiner.core.signal import smoothstep
-from refiner.core.skeletons import convert, get_skeleton, joint_bone_lengths, with_bone_lengths
-from refiner.refinement.blended_pose import blend_windows, fit_blend, one_chain, unblended_pose
+from refiner.core.skeletons import bone_lengths, convert, get_skeleton, joint_bone_lengths, with_bone_lengths
+from refiner.refinement.blended_pose import blend_windows, exact_bones, fit_blend, one_chain, unblended_pose
 from refiner.refinement.pipeline import Refiner
 
 
@@ -36,6 +36,15 @@ def test_windows_are_runs_off_the_core_inside_the_clip():
     off[36:] = True
     assert blend_windows(off) == [(4, 20)]
     assert blend_windows(np.zeros(10, bool)) == []
+
+
+def test_exact_bones_are_back_on_their_first_length_in_the_last_frame():
+    off = np.zeros((40, 3), bool)
+    off[1:39, 0] = True  # a blend's window: all but the first and last frames
+    off[1:, 1] = True  # a bone that varies in every frame (CMU's hands and toes)
+    off[30:, 2] = True  # drifting to the clip's end
+    assert exact_bones(off).tolist() == [True, False, False]
+    assert exact_bones(np.stack([off, np.zeros_like(off)])).tolist() == [[True, False, False], [True] * 3]
 
 
 def test_one_limb_is_one_chain_and_two_are_not():
@@ -119,3 +128,20 @@ def test_a_converted_layout_is_unblended_in_its_own_bones(humanact12):
     _, report = transition_only.refine(given, return_report=True)
     assert not any(c.get("repair") == "unblended_pose" for c in report.changes)
 
+
+
+@pytest.mark.real_data
+def test_cmu_clips_are_unblended_in_the_bones_they_hold_exact():
+    from conftest import shared_data_dir
+
+    from refiner.io.datasets import load_cmu_mocap
+
+    cmu = load_cmu_mocap(shared_data_dir() / "cmu_mocap" / "cmu_mocap_labeled_joints.npz").split("test")
+    x = next(m for m in cmu.motions if len(m.joints) >= 100).joints[:100].astype(np.float64)
+    bad = _with_pose(x, 85, 30, 60).astype(np.float32)
+    err = lambda y: float(np.linalg.norm(y - x, axis=-1).mean())  # noqa: E731
+    out, report = refiner.refine(bad, skeleton="cmu_mocap", return_report=True)
+    assert err(out) < 0.2 * err(bad), (err(out), err(bad))
+    assert any(c.get("repair") == "unblended_pose" for c in report.changes)
+    lengths = bone_lengths(x, "cmu_mocap")
+    assert (lengths.std(0) / lengths.mean(0)).max() > 1e-3  # CMU's hands and toes vary: no clip-wide exact core
