@@ -245,7 +245,8 @@ def _skeletons(rec: dict) -> str:
         f"## Skeletons (HumanAct12 subjects 11-12, every {rec['stride']}th clip: {rec['clips']} clips, "
         "converted to each layout; severity 2; action unknown)", "",
         "`weights`: the dataset the skeleton's refiner was trained on (`humanact12, converted`: through the "
-        "HumanAct12 weights, `ConvertedRefiner`).", "",
+        "HumanAct12 weights, `ConvertedRefiner`). A skeleton whose weights were trained on another dataset scores "
+        "motion they never saw here (a transfer figure); its row on its weights' own held-out subjects follows.", "",
         markdown_table(["skeleton", "weights", "clean: MPJPE change cm", "clean: share of clips changed",
                         *[f"{f}: % removed" for f in names], "mean % removed"], rows)]
     for skel, r in rec.get("native", {}).items():
