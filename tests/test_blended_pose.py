@@ -47,6 +47,35 @@ def test_exact_bones_are_back_on_their_first_length_in_the_last_frame():
     assert exact_bones(np.stack([off, np.zeros_like(off)])).tolist() == [[True, False, False], [True] * 3]
 
 
+@pytest.mark.real_data
+def test_a_clip_with_too_few_exact_bones_is_left_and_a_chance_bone_is_left_out(humanact12):
+    x = _walk(humanact12).joints.astype(np.float64)
+    bad = _with_pose(x, 80, 20, 50)
+    err = lambda y: float(np.linalg.norm(y - x, axis=-1).mean())  # noqa: E731
+    report = lambda: type("Report", (), {"changes": []})()  # noqa: E731
+    model = type("Model", (), {"skeleton": "humanact12"})()
+    reports = [report()]
+    given = bad[None].copy()
+    out = blended_pose.unblended_poses(model, given, reports, "full")
+    np.testing.assert_array_equal(given, bad[None])  # the input is not modified
+    assert err(out[0]) < 0.02 * err(bad) and len(reports[0].changes) == 1
+    skel = get_skeleton("humanact12")
+    wobble = 1 + 0.01 * np.sin(np.arange(len(x)) * 2.1)
+    wobble[-1] = 1.0  # varies in every frame but the last, back on its first length by chance
+    tips = [skel.index(n) for n in ("left_hand", "right_hand", "left_foot", "right_foot", "head")]
+    lengths = joint_bone_lengths(bad, "humanact12").copy()
+    lengths[:, tips] *= wobble[:, None]
+    varying = with_bone_lengths(bad, lengths, "humanact12")
+    reports = [report()]
+    out = blended_pose.unblended_poses(model, varying[None], reports, "full")
+    assert len(reports[0].changes) == 1 and err(out[0]) < 0.2 * err(bad)  # read again without the chance bones
+    lengths = joint_bone_lengths(bad, "humanact12").copy()
+    lengths[:, 5:] *= wobble[:, None]  # too few bones stay steady
+    few = with_bone_lengths(bad, lengths, "humanact12")
+    out = blended_pose.unblended_poses(model, few[None], [report()], "full")
+    assert np.array_equal(out[0], few)
+
+
 def test_one_limb_is_one_chain_and_two_are_not():
     skel = get_skeleton("humanact12")
     child = {int(c): k for k, (_, c) in enumerate(skel.bones)}

@@ -246,7 +246,7 @@ def _skeletons(rec: dict) -> str:
         "converted to each layout; severity 2; action unknown)", "",
         "`weights`: the dataset the skeleton's refiner was trained on (`humanact12, converted`: through the "
         "HumanAct12 weights, `ConvertedRefiner`). A skeleton whose weights were trained on another dataset scores "
-        "motion they never saw here (a transfer figure); its row on its weights' own held-out subjects follows.", "",
+        "motion they never saw here (a transfer figure); a section below scores its weights' own held-out subjects.", "",
         markdown_table(["skeleton", "weights", "clean: MPJPE change cm", "clean: share of clips changed",
                         *[f"{f}: % removed" for f in names], "mean % removed"], rows)]
     for skel, r in rec.get("native", {}).items():
