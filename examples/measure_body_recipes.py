@@ -4,11 +4,12 @@ Usage::
 
     python examples/measure_body_recipes.py                                  # subjects 11-12, the shipped settings
     python examples/measure_body_recipes.py '{"subjects": [9, 10]}'          # the calibration subjects
-    python examples/measure_body_recipes.py '{"params": {"skating": 0}}'     # Refiner keywords
+    python examples/measure_body_recipes.py '{"params": {"threshold": 0.5}}'  # InfillConfig fields
     python examples/measure_body_recipes.py '{"recipes": ["float", "stutter"]}'
 
 Every 3rd clip of the given subjects, corrupted by each recipe (seed 700 + clip index; a window of 15-40 frames from
-a random frame), refined with the true action; prints the share of the added MPJPE removed and the clips changed:
+a random frame), refined by the default refiner (``MotionRefiner.pretrained("humanact12")``, its model learned on
+subjects 1-8 and calibrated on 9-10) with the true action; prints the share of the added MPJPE removed and the clips changed:
 
 - ``float``: the whole body raised 10 cm over the window (5-frame smoothstep ramps);
 - ``sink``: ... sunk 5 cm into the ground;
@@ -17,14 +18,13 @@ a random frame), refined with the true action; prints the share of the added MPJ
 - ``same_foot``: the legs swapped and mirrored about the body's midplane over the window (ramped over 4 frames):
   in a walk, a step with the same foot twice; ``same_foot_abrupt``: the same without ramps; ``legs_relabelled``: the
   left and right legs' joints trade places as they are, not mirrored (ramped over 4 frames: labels confused);
-  ``limbs_relabelled``: every left joint trades places with its right one as they are, without ramps (the training
-  flaw ``mirror`` at full weight); ``limbs_blended``: every left joint blended with its right one by a weight of
-  0.6-1.0, ramped over 4 frames (the training flaw ``mirror`` as it is drawn);
+  ``limbs_relabelled``: every left joint trades places with its right one as they are, without ramps;
+  ``limbs_blended``: every left joint blended with its right one by a weight of 0.6-1.0, ramped over 4 frames;
 - ``arm_up``: an arm held where it was at the window's start (its elbow, wrist and hand fixed to the shoulder, in
   the world's frame), let go over 6 frames at its end; ``arm_never_down``: held to the clip's end;
 
 and two inputs that are no flaw, whose change is printed instead: ``faster`` (played 1.25 times as fast) and
-``mirrored`` (left and right swapped, mirrored in x). About 3 minutes on one CPU core.
+``mirrored`` (left and right swapped, mirrored in x).
 """
 import json
 import sys
@@ -37,8 +37,7 @@ from refiner.core.signal import resample, smoothstep
 from refiner.core.skeletons import get_skeleton
 from refiner.evaluation.recipes import removed_by_recipe
 from refiner.io.datasets import load_humanact12
-from refiner.refinement.pipeline import Refiner
-from refiner.refinement.training_flaws import mirror_pairs
+from refiner.refinement.motion_refiner import MotionRefiner
 
 torch.set_num_threads(1)
 threadpool_limits(1)
@@ -49,6 +48,17 @@ LEGS = [[SKEL.index(f"{side}_{j}") for j in ("hip", "knee", "ankle", "foot")] fo
 FLAWS = ("float", "sink", "stutter", "damped", "exaggerated", "same_foot", "same_foot_abrupt", "legs_relabelled",
          "limbs_relabelled", "limbs_blended", "arm_up", "arm_never_down")
 NO_FLAWS = ("faster", "mirrored")
+
+
+def mirror_pairs(skel) -> np.ndarray:
+    """``(J,)`` index of each joint's left/right counterpart (itself when it has none), from the joint names."""
+    names = list(skel.joint_names)
+    out = np.arange(len(names))
+    for j, n in enumerate(names):
+        for a, b in (("left", "right"), ("right", "left")):
+            if a in n and n.replace(a, b) in names:
+                out[j] = names.index(n.replace(a, b))
+    return out
 
 
 def ramp(n_frames, a, b, width):
@@ -122,7 +132,7 @@ def main():
     data = load_humanact12()
     subjects = tuple(cfg.get("subjects", (11, 12)))
     clips = [m for m, s in zip(data.motions, data.subjects) if s in subjects][::3]
-    model = Refiner.pretrained("humanact12", split="train", **cfg.get("params", {}))
+    model = MotionRefiner.pretrained("humanact12", **cfg.get("params", {}))
     names = cfg.get("recipes", FLAWS + NO_FLAWS)
     flaws = [r for r in names if r in FLAWS]
     records = removed_by_recipe(model, clips, {r: (lambda x, rng, r=r: corrupted(x, rng, r)) for r in flaws}, seed=700,

@@ -3,12 +3,11 @@
 Usage::
 
     python examples/measure_noise_recipes.py                            # the shipped settings
-    python examples/measure_noise_recipes.py '{"SPIKE_FRAMES": 0}'       # the spike rule off (the release before)
-    python examples/measure_noise_recipes.py '{"NOISY_BONES": null}'     # noise runs from the flaw classifier alone
-    python examples/measure_noise_recipes.py '{"BLEND_AUTOCORRELATION": Infinity}'   # no blend rebuild
+    python examples/measure_noise_recipes.py '{"threshold": 0.5}'        # InfillConfig fields
 
-Every 3rd held-out clip (subjects 11-12), seeded with ``numpy.random.default_rng(clip index)``, refined with the
-true action; prints the share of the added MPJPE removed per recipe:
+Every 3rd held-out clip (subjects 11-12), seeded with ``numpy.random.default_rng(clip index)``, refined by the default
+refiner (``MotionRefiner.pretrained("humanact12")``) with the true action; prints the share of the added MPJPE removed
+per recipe:
 
 - ``arm_noise``: white noise (1 cm) on the 8 arm joints over a 10-30-frame window;
 - ``window_noise_2cm``: white noise (2 cm) on every joint over such a window;
@@ -17,8 +16,7 @@ true action; prints the share of the added MPJPE removed per recipe:
 - ``low_freq``: noise (3 cm) smoothed over 3 frames and tripled, over such a window;
 - ``whole_clip_noise_0.5cm``: white noise (0.5 cm) on every frame.
 
-The JSON sets module constants: ``SPIKE_FRAMES`` and ``BLEND_AUTOCORRELATION`` of :mod:`refiner.core.rigid`,
-``NOISY_BONES`` of :mod:`refiner.refinement.rigid_step`. About 60 s on one CPU core.
+The JSON sets fields of :class:`refiner.refinement.steps.infill.InfillConfig`.
 """
 import json
 import sys
@@ -28,10 +26,8 @@ import torch
 from scipy.ndimage import gaussian_filter1d
 from threadpoolctl import threadpool_limits
 
-import refiner.core.rigid as rigid
-import refiner.refinement.rigid_step as rigid_step
 from refiner.io.datasets import load_humanact12
-from refiner.refinement.pipeline import Refiner
+from refiner.refinement.motion_refiner import MotionRefiner
 
 ARMS = [16, 17, 18, 19, 20, 21, 22, 23]  # SMPL shoulders, elbows, wrists, hands
 RECIPES = ("arm_noise", "window_noise_2cm", "bursts", "low_freq", "whole_clip_noise_0.5cm")
@@ -60,10 +56,9 @@ def seeded(name: str, x: np.ndarray, rng) -> np.ndarray:
 def main() -> None:
     torch.set_num_threads(1)
     threadpool_limits(1)
-    for key, value in json.loads(sys.argv[1] if len(sys.argv) > 1 else "{}").items():
-        setattr(rigid_step if key == "NOISY_BONES" else rigid, key, value)
+    options = json.loads(sys.argv[1] if len(sys.argv) > 1 else "{}")
     clips = load_humanact12().split("test").motions[::3]
-    model = Refiner.pretrained("humanact12", split="train")
+    model = MotionRefiner.pretrained("humanact12", **options)
     for name in RECIPES:
         before, after = [], []
         for i, clip in enumerate(clips):

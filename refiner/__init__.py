@@ -1,12 +1,9 @@
 """motion-refiner: refine synthesized 3D human motion with unsupervised learned motion concepts."""
 from __future__ import annotations
 
-from refiner.core import moved_modules as _moved_modules
 from refiner.core.motion import Motion, stack_motions, unstack_motions
 from refiner.core.skeletons import Skeleton, get_skeleton, list_skeletons, register_skeleton
 from refiner.refinement.refined_generator import RefinedGenerator
-
-_moved_modules.install()
 
 __all__ = [
     "Motion",

@@ -84,15 +84,17 @@ def test_bad_hyper_parameters_raise_on_use(tiny_clip):
 
 def test_registry_factories():
     assert list(FLAW_REFINERS)[:4] == ["identity", "savgol", "gaussian", "spline_fit"]
-    assert {"ours_anchor", "ours_transition", "ours_full"} <= set(FLAW_REFINERS)
+    assert list(FLAW_REFINERS)[4:] == ["ours_full", "ours_anchor", "ours_transition", "ours_concepts",
+                                       "ours_concept_snap"]
     for name in ("identity", "savgol", "gaussian", "spline_fit"):
         assert hasattr(FLAW_REFINERS[name](), "refine")
-    for name in ("ours_anchor", "ours_transition", "ours_full"):
+    assert FLAW_REFINERS["ours_full"]().method == "motion"  # the default refiner
+    for name, mode in (("ours_anchor", "anchor"), ("ours_transition", "transition"), ("ours_concepts", "full")):
         try:
             refiner = FLAW_REFINERS[name]()
         except (ImportError, ValueError):
             continue  # pipeline or its held-out weights not available yet: the bench skips it
-        assert refiner.mode == name.split("_")[1]
+        assert refiner.mode == mode and refiner.refiner_.method == "concepts"
 
 
 @pytest.mark.real_data

@@ -37,6 +37,7 @@ def test_round_trip_with_report_gif_and_bvh(clip, tmp_path, capsys):
     report = json.loads((tmp_path / "out" / "walk_refined.report.json").read_text())
     (clip_report,) = report["clips"]
     assert clip_report["action"] == 1 and clip_report["n_frames"] == 60 and report["mode"] == "full"
+    assert report["method"] == "motion" and clip_report["threshold_quantity"] == "flaw_probability"
     changed = np.zeros(60, dtype=bool)
     for c in clip_report["changes"]:
         changed[c["start"]:c["stop"]] = True
@@ -57,11 +58,11 @@ def test_refuses_to_overwrite_without_force(clip, tmp_path, capsys):
     src, out = tmp_path / "a.npy", tmp_path / "b.npy"
     np.save(src, clip[:30])
     np.save(out, np.zeros(3))
-    assert main(["refine", str(src), "-o", str(out), "--mode", "transition"]) == 1
+    assert main(["refine", str(src), "-o", str(out), "--method", "concepts", "--mode", "transition"]) == 1
     err = capsys.readouterr().err
     assert "refusing to overwrite" in err and "--force" in err
     np.testing.assert_array_equal(np.load(out), np.zeros(3))
-    assert main(["refine", str(src), "-o", str(out), "--mode", "transition", "--force"]) == 0
+    assert main(["refine", str(src), "-o", str(out), "--method", "concepts", "--mode", "transition", "--force"]) == 0
     assert np.load(out).shape == (30, 24, 3)
 
 
@@ -74,7 +75,7 @@ def test_batch_reports_bad_files_and_continues(clip, tmp_path, capsys):
     (folder / "corrupt.npz").write_bytes(b"not a zip file")
     np.save(folder / "nan.npy", np.full((20, 24, 3), np.nan, dtype=np.float32))
     (folder / "notes.txt").write_text("ignored")
-    code = main(["refine", str(folder), "-o", str(tmp_path / "out"), "--mode", "anchor"])
+    code = main(["refine", str(folder), "-o", str(tmp_path / "out"), "--method", "concepts", "--mode", "anchor"])
     captured = capsys.readouterr()
     assert code == 1
     for name in ("bad_shape.npy", "corrupt.npz", "nan.npy"):
@@ -135,7 +136,7 @@ def test_single_file_gif_shows_progress_and_takes_a_size(clip, tmp_path, capsys)
 
     src = tmp_path / "walk.npy"
     np.save(src, clip[:30])
-    code = main(["refine", str(src), "-o", str(tmp_path / "o.npy"), "--gif", "--gif-size", "160", "--mode", "anchor"])
+    code = main(["refine", str(src), "-o", str(tmp_path / "o.npy"), "--gif", "--gif-size", "160"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert f"refining {src} and drawing its GIF ..." in captured.out
@@ -162,26 +163,42 @@ def test_batch_file_errors_name_the_clip(clip, tmp_path, capsys):
 def test_concept_snap_option(clip, tmp_path, capsys):
     src, out = tmp_path / "walk.npy", tmp_path / "snapped.npy"
     np.save(src, clip)
-    assert main(["refine", str(src), "-o", str(out), "--action", "walk", "--concept-snap", "1", "--report"]) == 0
+    snap = ["--method", "concepts", "--action", "walk", "--concept-snap"]
+    assert main(["refine", str(src), "-o", str(out), *snap, "1", "--report"]) == 0
     report = json.loads((tmp_path / "snapped.report.json").read_text())
+    assert report["method"] == "concepts"
     assert "concept_snap" in [c["step"] for c in report["clips"][0]["changes"]]
     assert np.abs(np.load(out) - clip).max() > 0.01  # the real walk that needs nothing is snapped all the same
-    assert main(["refine", str(src), "-o", str(out), "--action", "walk", "--concept-snap", "2", "--force"]) == 2
+    assert main(["refine", str(src), "-o", str(out), *snap, "2", "--force"]) == 2
     assert "concept_snap" in capsys.readouterr().err
-    assert main(["refine", str(src), "-o", str(out), "--concept-snap", "1", "--force"]) == 2  # no action to snap to
-    assert "needs `--action`" in capsys.readouterr().err
+    assert main(["refine", str(src), "-o", str(out), "--method", "concepts", "--concept-snap", "1", "--force"]) == 2
+    assert "needs `--action`" in capsys.readouterr().err  # no action to snap to
 
 
 @pytest.mark.real_data
-def test_texture_option_filters_every_clip_only_when_asked(clip, tmp_path, capsys):
+def test_method_option_and_the_concepts_methods_options(clip, tmp_path, capsys):
+    """``--method`` picks the refiner; ``--mode``, ``--concept-snap`` and ``--refiner`` are the concepts method's, refused
+    with the default; ``--refiner DIR`` loads a saved concepts refiner; the learned method's options are gone."""
+    from refiner.refinement.pipeline import Refiner
+
     src = tmp_path / "walk.npy"
-    np.save(src, clip)
-    assert main(["refine", str(src), "-o", str(tmp_path / "all.npy"), "--texture", "all", "--report"]) == 0
-    report = json.loads((tmp_path / "all.report.json").read_text())
-    assert [c["step"] for c in report["clips"][0]["changes"]].count("texture") == 1
-    assert np.abs(np.load(tmp_path / "all.npy") - clip).max() > 1e-4  # taken for a generator's clip: filtered
-    assert main(["refine", str(src), "-o", str(tmp_path / "auto.npy")]) == 0  # default for joints: off
-    np.testing.assert_array_equal(np.load(tmp_path / "auto.npy"), clip)  # a real walk is not noisy throughout
-    with pytest.raises(SystemExit) as exit_:
-        main(["refine", str(src), "-o", str(tmp_path / "x.npy"), "--texture", "some"])
-    assert exit_.value.code == 2 and "--texture" in capsys.readouterr().err
+    np.save(src, clip[:40])
+    for extra, named in ((["--mode", "anchor"], "--mode"), (["--concept-snap", "1", "--action", "walk"], "--concept-snap"),
+                         (["--method", "motion", "--refiner", str(tmp_path)], "--refiner")):
+        assert main(["refine", str(src), "-o", str(tmp_path / "x.npy"), *extra]) == 2
+        err = capsys.readouterr().err
+        assert f"{named} belongs to `--method concepts`" in err
+    assert not (tmp_path / "x.npy").exists()
+    for gone in (["--texture", "all"], ["--misread-snap", "1"], ["--method", "learned"]):
+        with pytest.raises(SystemExit) as exit_:
+            main(["refine", str(src), "-o", str(tmp_path / "x.npy"), *gone])
+        assert exit_.value.code == 2
+        capsys.readouterr()
+    saved = tmp_path / "concepts"
+    Refiner.pretrained("humanact12", split="train").save(saved)
+    assert main(["refine", str(src), "-o", str(tmp_path / "c.npy"), "--refiner", str(saved), "--mode", "anchor",
+                 "--report"]) == 0  # --refiner: the concepts method without naming it
+    report = json.loads((tmp_path / "c.report.json").read_text())
+    assert report["method"] == "concepts" and report["mode"] == "anchor"
+    np.testing.assert_array_equal(np.load(tmp_path / "c.npy"),
+                                  Refiner.load(saved).refine(clip[:40], mode="anchor"))

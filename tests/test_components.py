@@ -116,12 +116,9 @@ def test_schedule_is_one_parameter_and_old_flat_files_fold_into_it(synthetic, tm
     from safetensors import safe_open
 
     from refiner.nn.components import NetworkComponent
-    from refiner.refinement.flaw_classifier import FlawClassifier
-    from refiner.refinement.flaw_denoiser import FlawDenoiser
-    from refiner.refinement.learned_refinement import FlawRecognizer, FlawRepairer
 
     weights = Path(__file__).resolve().parents[1] / "refiner" / "weights" / "humanact12"
-    for cls in (*CLASSES.values(), FlawClassifier, FlawRecognizer, FlawRepairer, FlawDenoiser):
+    for cls in CLASSES.values():
         params = cls().get_params()
         assert isinstance(params["schedule"], TrainSchedule) and not {"n_epochs", "device", "verbose"} & set(params)
     from refiner.core.serialization import load_state, save_state

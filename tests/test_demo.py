@@ -47,7 +47,8 @@ def test_quick_demo_writes_every_file(demo_run):
         assert before.shape == after.shape == (60, 24, 3)
         np.testing.assert_allclose(before[0, 0], 0.0, atol=1e-6)
         report = json.loads((out / f"{stem}_report.json").read_text())
-        assert report["n_frames"] == 60 and len(report["anchor_probability"]) == 60
+        assert report["n_frames"] == 60 and len(report["flaw_probability"]) == 60  # the default refiner's
+        assert report["threshold_quantity"] == "flaw_probability" and 0 < report["threshold"] < 1
         changed = np.zeros(60, dtype=bool)
         for c in report["changes"]:
             changed[c["start"]:c["stop"]] = True

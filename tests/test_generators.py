@@ -87,16 +87,25 @@ def test_plain_callables_as_generator_and_refiner(pm):
 
 
 def test_default_refiner_falls_back_to_identity_when_pipeline_missing(pm, monkeypatch, xyz_options):
-    monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", None)  # makes `import refiner.refinement.pipeline` fail
+    # makes `import refiner.refinement.motion_refiner` fail
+    monkeypatch.setitem(sys.modules, "refiner.refinement.motion_refiner", None)
     with pytest.warns(UserWarning, match="default refiner"):
         gen = RefinedGenerator(XyzVae(), adapter="action2motion", adapter_options=xyz_options, plugin_manager=pm)
     m = gen.sample(2)[0]
     np.testing.assert_array_equal(m.joints, XyzVae().sample(2)[0].reshape(60, 24, 3))
 
 
-def test_default_refiner_is_the_pretrained_pipeline(pm, monkeypatch, xyz_options):
-    """With refiner.refinement.pipeline importable, Refiner.pretrained(skeleton) is what gets used."""
+def test_default_refiner_is_the_pretrained_motion_refiner(pm, monkeypatch, xyz_options):
+    """With refiner.refinement.motion_refiner importable, MotionRefiner.pretrained(skeleton) is what gets used."""
     import types
+
+    from refiner.refinement.motion_refiner import MotionRefiner
+
+    gen = RefinedGenerator(XyzVae(), adapter="action2motion", adapter_options=xyz_options, plugin_manager=pm)
+    assert isinstance(gen.refiner, MotionRefiner) and gen.refiner.method == "motion"
+    assert gen.refiner.skeleton == "humanact12" and "MotionRefiner" in repr(gen)
+    motions, reports = gen.sample(2, n=1, return_report=True)
+    assert motions[0].joints.shape == (60, 24, 3) and reports[0].action == 2 and reports[0].flaw_probability
 
     calls = []
 
@@ -106,20 +115,17 @@ def test_default_refiner_is_the_pretrained_pipeline(pm, monkeypatch, xyz_options
             calls.append((skeleton, options))
             return LiftingRefiner()
 
-    monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", types.SimpleNamespace(Refiner=FakeRefiner))
+    monkeypatch.setitem(sys.modules, "refiner.refinement.motion_refiner", types.SimpleNamespace(MotionRefiner=FakeRefiner))
     gen = RefinedGenerator(XyzVae(), adapter="action2motion", adapter_options=xyz_options, plugin_manager=pm)
-    from refiner.refinement.inputs import GENERATOR_OPTIONS
-
-    assert GENERATOR_OPTIONS["texture"] == "all" and GENERATOR_OPTIONS["misread_snap"] > 0
-    assert calls == [("humanact12", GENERATOR_OPTIONS)] and isinstance(gen.refiner, LiftingRefiner)
+    assert calls == [("humanact12", {})] and isinstance(gen.refiner, LiftingRefiner)
 
     class NoWeights:
         @classmethod
         def pretrained(cls, skeleton, **options):
-            raise ValueError("no shipped weights")
+            raise ValueError("no motion model")
 
-    monkeypatch.setitem(sys.modules, "refiner.refinement.pipeline", types.SimpleNamespace(Refiner=NoWeights))
-    with pytest.raises(ValueError, match=r"default refiner Refiner.pretrained\('uestc'\) failed: no shipped weights"):
+    monkeypatch.setitem(sys.modules, "refiner.refinement.motion_refiner", types.SimpleNamespace(MotionRefiner=NoWeights))
+    with pytest.raises(ValueError, match=r"default refiner MotionRefiner.pretrained\('uestc'\) failed: no motion model"):
         RefinedGenerator(XyzVae(), adapter="action2motion", skeleton="uestc", plugin_manager=pm)
 
 

@@ -115,7 +115,7 @@ def test_train_tiny_on_a_generated_folder(tmp_path, uestc_clips, one_torch_threa
     out = tmp_path / "out"
     assert main(["train", "--dataset", "joints", "--data", str(data), "--config", "tiny", "--out", str(out)]) == 0
     refiner = Refiner.load(out)
-    assert refiner.skeleton == "uestc" and refiner.manifest["dataset"] == "joints"
+    assert refiner.skeleton == "uestc" and refiner.manifest["dataset"] == "joints" and refiner.method == "concepts"
     assert "user-supplied" in refiner.manifest["licence"]
     before = clips[3].copy()
     refined = refiner.refine(clips[3])
@@ -125,38 +125,11 @@ def test_train_tiny_on_a_generated_folder(tmp_path, uestc_clips, one_torch_threa
     assert np.linalg.norm(refined - clips[3], axis=-1).mean() < 0.5
 
 
-@pytest.mark.real_data
-def test_train_whole_in_parallel_jobs(tmp_path, uestc_clips, one_torch_thread):
-    """`motion-refiner train --whole --jobs 2` trains every part in two processes and assembles a learned refiner
-    (timing estimator and noise residual included)."""
-    import json
-
-    from refiner import Refiner
+def test_train_has_no_learned_method_options(tmp_path, capsys):
+    """The learned method's training (``--whole``, ``--learned``, ``--base``, ``--jobs``) is gone; the concepts method's stays."""
     from refiner.cli.main import main
 
-    clips, labels = uestc_clips
-    data = _write_folder(tmp_path / "clips", clips, labels)
-    out = tmp_path / "out"
-    args = ["train", "--whole", "--jobs", "2", "--dataset", "joints", "--data", str(data), "--config", "tiny",
-            "--device", "cpu", "--out", str(out)]
-    assert main(args) == 0
-    refiner = Refiner.load(out)
-    assert refiner.method == "learned" and refiner.skeleton == "uestc"
-    assert refiner.timing_estimator is not None and refiner.noise_residual is not None
-    assert refiner.texture_filter is not None and refiner.pose_prior is not None
-    record = json.loads((out / "train_whole.json").read_text())
-    assert set(record["job_seconds"]) == {"paper", "noise", "timing_estimator", "flaw_repairer", "texture_filter",
-                                          "pose_prior", "flaw_recognizer", "flaw_classifier"}
-    assert record["wall_seconds"] >= record["parallel_seconds"] > 0
-    logs = (out / "logs" / "noise.log").read_text()
-    assert logs.count("$ ") == 2 and logs.index("noise_filter") < logs.index("noise_residual")
-    refined = refiner.refine(clips[3])
-    assert refined.shape == clips[3].shape and np.isfinite(refined).all()
-
-
-def test_train_whole_refuses_mixed_options(tmp_path, capsys):
-    from refiner.cli.main import main
-
-    assert main(["train", "--whole", "--only", "pose_prior", "--dataset", "joints", "--data", str(tmp_path),
-                 "--out", str(tmp_path / "out")]) == 2
-    assert "`--whole` trains every part itself" in capsys.readouterr().err
+    for option in (["--whole"], ["--learned"], ["--base", str(tmp_path)], ["--jobs", "2"]):
+        with pytest.raises(SystemExit) as exit_:
+            main(["train", *option, "--dataset", "joints", "--data", str(tmp_path), "--out", str(tmp_path / "out")])
+        assert exit_.value.code == 2 and option[0] in capsys.readouterr().err

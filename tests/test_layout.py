@@ -92,17 +92,9 @@ def test_only_adapters_import_adapter_modules():
     assert not bad, bad
 
 
-def test_old_flat_import_paths_give_the_new_module_with_a_deprecation_warning():
+def test_old_flat_import_paths_are_gone():
+    """0.1's flat paths (``refiner.pipeline``) were deprecated aliases of a release never published; they are removed."""
     import importlib
-    import sys
 
-    from refiner.core.moved_modules import MOVED
-
-    for old, new in MOVED.items():
-        sys.modules.pop(f"refiner.{old}", None)
-        with pytest.warns(DeprecationWarning, match=f"refiner.{old} moved to refiner.{new}"):
-            module = importlib.import_module(f"refiner.{old}")
-        assert module is importlib.import_module(f"refiner.{new}")
-    from refiner.pipeline import Refiner  # the names a 0.1 user imported are still there
-
-    assert Refiner is importlib.import_module("refiner").Refiner
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("refiner.pipeline")

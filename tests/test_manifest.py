@@ -35,11 +35,11 @@ def edit(folder: Path, change, *, rehash: bool = False):
 def test_shipped_refiner_manifests_carry_their_content_hash(folder):
     manifest, paths = read_refiner_manifest(_WEIGHTS / folder, _PARTS)
     assert manifest[CONTENT_KEY] == content_sha256(manifest)
-    options = {"flaw_denoiser", "motion_infiller"}  # trainable options, not shipped
-    assert set(paths) == set(_PARTS) - options and len(manifest["action_names"]) == 12
+    assert set(paths) == set(_PARTS) and len(manifest["action_names"]) == 12  # the concepts method's parts
+    assert sorted(p.name for p in (_WEIGHTS / folder).glob("*.safetensors")) == sorted(p.name for p in paths.values())
     refiner = Refiner.load(_WEIGHTS / folder)
-    assert refiner.retiming == "estimated"  # the timing estimator is shipped and used
-    assert refiner.timing_estimator.threshold_ == pytest.approx(manifest["learned"]["timing_threshold_frames"])
+    assert refiner.method == "concepts" and refiner.anchor_quality.threshold_ == pytest.approx(
+        manifest["calibration"]["anchor_threshold"])
 
 
 def test_shipped_generator_manifest_carries_its_content_hash():
@@ -56,9 +56,9 @@ def test_shipped_weights_stay_under_30_mb_in_all():
 @pytest.mark.parametrize("change", [
     lambda m: m["action_names"].reverse(),
     lambda m: m["calibration"].__setitem__("anchor_threshold", m["calibration"]["anchor_threshold"] + 1.0),
-    lambda m: m["learned"].__setitem__("flaw_threshold", 0.5),
+    lambda m: m.__setitem__("licence", "free for all uses"),
     lambda m: m.pop(CONTENT_KEY),
-], ids=["reversed-action-names", "anchor-threshold", "flaw-threshold", "hash-removed"])
+], ids=["reversed-action-names", "anchor-threshold", "licence", "hash-removed"])
 def test_edited_manifest_content_is_refused(weights_copy, change):
     edit(weights_copy, change)
     with pytest.raises(ValueError, match=f"does not match its `{CONTENT_KEY}`"):
@@ -84,8 +84,8 @@ def test_manifest_schema_errors_are_value_errors(weights_copy, change, match):
 
 
 def test_deleted_weight_file_and_bad_json(weights_copy):
-    (weights_copy / "flaw_repairer.safetensors").unlink()
-    with pytest.raises(ValueError, match=r"flaw_repairer.safetensors' is listed in .* but missing"):
+    (weights_copy / "anchor_refiner.safetensors").unlink()
+    with pytest.raises(ValueError, match=r"anchor_refiner.safetensors' is listed in .* but missing"):
         Refiner.load(weights_copy)
     (weights_copy / "manifest.json").write_text("{not json")
     with pytest.raises(ValueError, match="not valid JSON"):

@@ -75,10 +75,11 @@ def test_doctor_reports_weights_evaluators_data_and_torch(no_shared):
     assert code == 0
     report = json.loads(printed)
     weights = {w["name"]: w for w in report["weights"]}
-    assert set(weights) >= {"humanact12", "humanact12-train", "generators", "evaluators"}
+    assert set(weights) >= {"humanact12-motion", "humanact12", "humanact12-train", "generators", "evaluators"}
     assert all(w["verified"] and w["error"] is None for w in weights.values())
     assert sorted(weights["generators"]["entries"]) == ["a2m", "a2m-large", "actor", "actor-large", "mdm"]
-    assert "flaw_classifier" in weights["humanact12"]["entries"]
+    assert weights["humanact12-motion"]["kind"].startswith("motion model") and "all" in weights["humanact12-motion"]["entries"]
+    assert "recognizer" in weights["humanact12"]["entries"] and "flaw_classifier" not in weights["humanact12"]["entries"]
     evaluators = {e["name"]: e for e in report["evaluators"]}
     assert evaluators["humanact12"]["shipped"] == evaluators["humanact12"]["used"]
     assert evaluators["ntu13"]["used"] is None and evaluators["ntu13"]["data_folder"] == []

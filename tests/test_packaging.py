@@ -37,7 +37,9 @@ def test_wheel_contains_the_weights(tmp_path):
                           "-w", str(tmp_path), str(repo)], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     names = zipfile.ZipFile(next(tmp_path.glob("*.whl"))).namelist()
-    for folder in ("humanact12", "humanact12-train", "generators", "evaluators"):
+    for folder in ("humanact12-motion", "humanact12", "humanact12-train", "generators", "evaluators"):
         assert any(n.startswith(f"refiner/weights/{folder}/") and n.endswith(".safetensors") for n in names), folder
         assert f"refiner/weights/{folder}/manifest.json" in names
+    for module in ("motion_refiner", "motion_model", "networks/motion_net", "steps/infill", "steps/base"):  # the default
+        assert f"refiner/refinement/{module}.py" in names, module
     assert "refiner/weights/evaluators/LICENSE-action-to-motion.txt" in names  # MIT: the licence travels along

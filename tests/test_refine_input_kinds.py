@@ -7,13 +7,21 @@ import torch
 
 import refiner
 from refiner.nn.training import resolve_device
+from refiner.refinement.motion_refiner import MotionRefiner
 from refiner.refinement.pipeline import Refiner
 
 
 @pytest.fixture(scope="module")
+def forced():
+    """The default refiner with every gate off: it flags every frame but the first and last (which anchor the in-fill)
+    and keeps every change, whatever the weights, so a clip comes back with changed and unchanged frames."""
+    return MotionRefiner.pretrained("humanact12", threshold=0.0, min_gain=-1.0, jerk_share=1e9, slack_m=1e9)
+
+
+@pytest.fixture(scope="module")
 def flawed(humanact12):
-    """A real 60-frame clip in float64 that stalls on frames 25-36 (flagged and re-timed) with sub-float32
-    detail, and its action's name (so no test depends on inference)."""
+    """A real 60-frame clip in float64 that stalls on frames 25-36 with sub-float32 detail, and its action's name
+    (so no test depends on inference)."""
     clip = humanact12[100]
     x = clip.crop(0, 60).joints.astype(np.float64)
     x = x + 1e-9 * np.arange(x.size).reshape(x.shape) / x.size  # lost when rounded through float32
@@ -21,26 +29,35 @@ def flawed(humanact12):
     return x, humanact12.action_names[clip.action]
 
 
-def test_float64_comes_back_float64_with_unchanged_frames_bit_identical(flawed):
+def test_float64_comes_back_float64_with_unchanged_frames_bit_identical(flawed, forced):
     flawed_clip, action = flawed
-    out, report = refiner.refine(flawed_clip, action=action, return_report=True)
+    before = flawed_clip.copy()
+    out, report = refiner.refine(flawed_clip, action=action, return_report=True)  # the shipped default
+    assert out.dtype == np.float64 and out.shape == flawed_clip.shape
+    np.testing.assert_array_equal(out[~report.changed_frames], flawed_clip[~report.changed_frames])
+    out, report = refiner.refine(flawed_clip, action=action, return_report=True, refiner=forced)
     changed = report.changed_frames
     assert out.dtype == np.float64 and out.shape == flawed_clip.shape
     assert changed.any() and not changed.all()
     np.testing.assert_array_equal(out[~changed], flawed_clip[~changed])
-    batch = refiner.refine(np.stack([flawed_clip, flawed_clip]), action=action)
+    assert np.abs(out[changed] - flawed_clip[changed]).max() > 1e-4
+    np.testing.assert_array_equal(flawed_clip, before)
+    batch = refiner.refine(np.stack([flawed_clip, flawed_clip]), action=action, refiner=forced)
     assert batch.dtype == np.float64
     np.testing.assert_array_equal(batch[0][~changed], flawed_clip[~changed])
+    np.testing.assert_allclose(batch[0], out, atol=1e-5)
 
 
-def test_bfloat16_and_float64_tensors_keep_their_dtype(flawed):
+def test_bfloat16_and_float64_tensors_keep_their_dtype(flawed, forced):
     flawed_clip, action = flawed
     for dtype in (torch.bfloat16, torch.float64):
         seq = torch.from_numpy(flawed_clip).to(dtype)
-        out, report = refiner.refine(seq, action=action, return_report=True)
+        out, report = refiner.refine(seq, action=action, return_report=True, refiner=forced)
         assert out.dtype == dtype and out.shape == seq.shape
         keep = torch.from_numpy(~report.changed_frames)
         assert torch.equal(out[keep], seq[keep]) and not torch.equal(out, seq)
+        out = refiner.refine(seq, action=action)  # the shipped default
+        assert out.dtype == dtype and out.shape == seq.shape
 
 
 def test_requires_grad_tensor_comes_back_detached_with_a_warning(flawed):
@@ -93,8 +110,8 @@ def test_report_names_the_quantity_its_threshold_applies_to():
                                 anchor_probability=[0.1, 0.9, 0.2]).to_dict()
     assert concepts["threshold_quantity"] == "anchor_scores" and list(concepts).index("threshold_quantity") == \
         list(concepts).index("threshold") + 1
-    learned = RefinementReport(mode="full", n_frames=3, threshold=0.93, flaw_probability=[0.1, 0.2, 0.3])
-    assert learned.to_dict()["threshold_quantity"] == "flaw_probability"
+    motion = RefinementReport(mode="full", n_frames=3, threshold=0.93, flaw_probability=[0.1, 0.2, 0.3])
+    assert motion.to_dict()["threshold_quantity"] == "flaw_probability"
     assert RefinementReport(mode="full", n_frames=3).to_dict()["threshold_quantity"] is None
 
 

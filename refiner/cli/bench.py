@@ -22,12 +22,13 @@ def bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", type=Path, default=None, help="folder holding humanact12/ (default: ../shared/data)")
     p.add_argument("--out", type=Path, default=None, help="folder for REPORT.md, plots and <suite>.json (the figures as records)")
     p.add_argument("--quick", action="store_true", help="tiny configuration (for tests)")
-    p.add_argument("--stride", type=int, default=1, help="flaws, skeletons: keep every N-th held-out clip (skeletons default 4)")
+    p.add_argument("--stride", type=int, default=1, help="flaws, skeletons, heldout: keep every N-th held-out clip (skeletons default 4)")
     p.add_argument("--severity", type=int, action="append", choices=[1, 2, 3], help="flaws: only these severities")
     p.add_argument("--weights", type=Path, default=None,
-                   help="folder of weight sets named as the shipped ones, looked in first: DIR/humanact12-train "
-                        "(e.g. `motion-refiner train --whole --split train --out DIR/humanact12-train`) replaces the "
-                        "shipped set every suite refines with; sets it lacks are the shipped ones")
+                   help="folder of weight sets named as the shipped ones, looked in first: DIR/humanact12-motion "
+                        "replaces the default refiner's motion model, DIR/humanact12-train (e.g. `motion-refiner train "
+                        "--split train --out DIR/humanact12-train`) the concepts method's weights; sets it lacks are "
+                        "the shipped ones")
 
 
 def bench_run(args: argparse.Namespace) -> int:
@@ -40,20 +41,21 @@ def run_benchmarks(suite: str, *, data: Path | None = None, out: Path | None = N
     """Run ``suite`` (or ``"all"``), printing each suite's progress and section; returns the exit code 0.
 
     With ``out`` every suite writes ``<suite>.json`` there and the sections are written as ``REPORT.md``. ``weights``:
-    a folder of weight sets looked in before the shipped ones (:meth:`refiner.Refiner.pretrained`).
+    a folder of weight sets looked in before the shipped ones (``MotionRefiner.pretrained``, :meth:`refiner.Refiner.pretrained`).
     """
     if weights is not None:
         found = refiner_weight_sets(weights)
         sets = [w["folder"] for w in found if w["folder"] == w["skeleton"] + ("" if w["split"] == "all" else f"-{w['split']}")]
+        sets += sorted(p.name for p in Path(weights).glob("*-motion") if (p / "manifest.json").is_file())
         if not sets:  # else every suite would quietly refine with the shipped weights
             raise ValueError(f"`--weights` {weights} holds no weight set named for its skeleton and split (found: "
                              f"{', '.join(w['folder'] for w in found) or 'none'}): give the folder that holds your set "
-                             "as humanact12-train/ (a refiner folder with its manifest.json).")
+                             "as humanact12-motion/ or humanact12-train/ (a folder with its manifest.json).")
     names = list(SUITES) if suite == "all" else [suite]
     sections = [] if weights is None else [f"Weights: `{weights}` ({', '.join(sets)}), looked in before the shipped ones."]
     for name in names:
         extra = ({"stride": stride, "severities": severities} if name == "flaws"
-                 else {"stride": stride} if name == "skeletons" and stride > 1 else {})
+                 else {"stride": stride} if name in ("skeletons", "heldout") and stride > 1 else {})
         record = SUITES[name](data, out, quick, progress=_printer(name), weights=weights, **extra)
         if weights is not None:  # the record says whose weights it measured
             record = write_record(out, name, {**record, "weights": {"folder": str(Path(weights).resolve()), "sets": sets}})

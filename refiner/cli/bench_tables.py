@@ -88,8 +88,9 @@ def _refiner_latency(rec: dict) -> str:
 def _refiner(rec: dict) -> str:
     rows = [[family, v["pose"], v["encoder"]] for family, v in rec["anchor_quality_auc"].items()]
     return "\n".join([
-        f"## Refiner (shipped subject-1-10 weights, {rec['clips']} held-out clips of subjects 11-12)", "",
-        "Parameters: " + _parameters(rec["parameters"]) + " (paper: 6.23 M).",
+        f"## Refiner (the default motion model, {rec['clips']} held-out clips of subjects 11-12)", "",
+        "Parameters: " + _parameters(rec["parameters"]) + " (paper: 6.23 M). (c) and the anchor scores below are the "
+        "concepts method's (subject-1-10 weights).",
         "", _refiner_figures(rec), "", _refiner_latency(rec),
         "", "Anchor quality scores, ROC AUC separating a seeded flawed anchor (severity 2) from a real one:", "",
         markdown_table(["flaw", "pose mixture (default)", "encoder-feature GMM (paper)"], rows)])
@@ -108,7 +109,7 @@ def _speed(rec: dict) -> str:
         markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", f"clips / s (batch of {rec['batch']})",
                         "peak memory"], rows),
         "", "Parameters: " + _parameters(rec["parameters"]) + ".",
-        "" if cuda else "No CUDA device here; run the same command on a GPU machine for the GPU rows.",
+        "" if cuda else "The default refiner's motion model runs on the CPU.",
     ])
 
 
@@ -149,21 +150,21 @@ def _generators(rec: dict) -> str:
         phys = r.get("physics")
         rows[-1] += [f"{phys['acceleration']:.2f}", f"{100 * phys['foot_skating']:.1f}",
                      f"{100 * phys['bone_length_variation']:.2f}"] if phys else ["", "", ""]
-        rows[-1] += [f"{100 * r['frames_changed']:.1f}", f"{r['flagged_anchors_per_clip']:.2f}",
+        rows[-1] += [f"{100 * r['frames_changed']:.1f}", f"{r['changes_per_clip']:.2f}",
                      f"{r['refine_seconds_per_clip']:.2f}"] if "frames_changed" in r else ["", "", ""]
     return "\n".join([
-        f"## Reference generators (HumanAct12; {rec['per_action']} samples per action, refiner trained on subjects "
-        f"1-10, reference: {rec['reference_clips']} clips of subjects 11-12)", "",
+        f"## Reference generators (HumanAct12; {rec['per_action']} samples per action, default refiner, "
+        f"reference: {rec['reference_clips']} clips of subjects 11-12)", "",
         "The generators were trained on subjects 1-10 (`motion-refiner train-generator`). Each sample is "
-        "converted by the `action2motion` adapter and refined with its sampled action by "
-        "`Refiner.pretrained(split=\"train\")` (`snapped`: the same with the concept-snap option, `concept_snap=1`). "
+        "converted by the `action2motion` adapter and refined with its sampled action by the default refiner, "
+        "`MotionRefiner.pretrained()` (its model learned on subjects 1-8). "
         "Metrics follow the Action2Motion protocol "
         f"(`refiner.evaluation.metrics.evaluate`, random GRU hidden state, {rec['n_replications']} replications, "
         "mean ± 95 % interval), real crops drawn with the generated action mixture. Accuracy is the recogniser's on "
         "the samples.", "",
         markdown_table(["generator", "samples", "accuracy %", "FID", "diversity", "multimodality",
                         "acceleration m/s²", "foot skating %", "bone-length variation %",
-                        "frames changed %", "flagged anchors / clip", "refine s / clip"], rows)])
+                        "frames changed %", "changes / clip", "refine s / clip"], rows)])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -171,23 +172,21 @@ def _generators(rec: dict) -> str:
 
 
 def _flaws(rec: dict) -> str:
-    families, held_out, records = rec["families"], rec["held_out_families"], rec["flawed"]
+    families, records = rec["families"], rec["flawed"]
     names = list(dict.fromkeys(r["refiner"] for r in records))
     table = {(r["family"], r["severity"], r["refiner"]): r for r in records}
     lines = [f"## Flaws (HumanAct12 subjects 11-12, {rec['clips']} clips, severities {rec['severities']})", "",
              "Share of the flaw's added MPJPE removed (%, all frames, against the clean clip; negative = worse "
-             "than leaving the flaw). Held-out families (mechanism never used in training): "
-             + ", ".join(f"`{f}`" for f in held_out) + ". Oracle rows get the true flaw mask.", ""]
+             "than leaving the flaw). `ours_full` is the default refiner (the motion model), the other `ours_*` the "
+             "concepts method. Oracle rows get the true flaw mask.", ""]
     notes = [f"- `{name}` skipped: {why}" for name, why in rec["skipped"].items()]
     lines += notes + ([""] if notes else [])
     for severity in rec["severities"]:
         summary = rec["summary"][str(severity)]
         rows = [[name] + [float(table[(f, severity, name)]["removed_pct"]) for f in families]
-                + [summary[name][k] for k in ("training_mean_removed_pct", "held_out_mean_removed_pct",
-                                              "mean_removed_pct")] for name in names]
-        header = ["refiner"] + [f + (" (held out)" if f in held_out else "") for f in families]
+                + [summary[name]["mean_removed_pct"]] for name in names]
         lines += [f"### Severity {severity}: % of added MPJPE removed", "",
-                  markdown_table(header + ["mean, training families", "mean, held-out", "mean, all 7"], rows), ""]
+                  markdown_table(["refiner"] + list(families) + [f"mean, all {len(families)}"], rows), ""]
         mrows = [[name] + [float(table[(f, severity, name)]["mpjpe_cm"]) for f in families] for name in names]
         lines += [f"### Severity {severity}: MPJPE (cm, all frames; `identity` = the flaw)", "",
                   markdown_table(["refiner"] + list(families), mrows), ""]
@@ -214,7 +213,8 @@ def _samples_part(title: str, recogniser: str, rec: dict, accuracy_target: str) 
     return [f"## {title}", "", markdown_table(["figure", "generated", "refined", "target"], rows), "",
             "Changes by step (over all clips): " + (", ".join(f"{k} {v}" for k, v in rec["changes_by_step"].items())
                                                   or "none") + ".", "",
-            *([f"With the concept-snap option (`concept_snap=1`): accuracy {100 * rec['snapped']['accuracy']:.2f} %, "
+            *([f"The concepts method with its concept-snap option (`concept_snap=1`): accuracy "
+               f"{100 * rec['snapped']['accuracy']:.2f} %, "
                f"bone-length variation {100 * rec['snapped']['bone_length_variation']:.3f} %, "
                f"{100 * rec['snapped']['frames_changed']:.0f} % of frames changed.", ""] if "snapped" in rec else []),
             "First clip's report: " + (json.dumps(rec["reports"][0]["changes"]) if rec["reports"] else "-")]
@@ -223,13 +223,13 @@ def _samples_part(title: str, recogniser: str, rec: dict, accuracy_target: str) 
 def _samples(rec: dict) -> str:
     if "skipped" in rec:
         return f"## Real generator samples\n\n({rec['skipped']}; skipped)"
-    lines = _samples_part(f"Real generator samples (Action2Motion xyz VAE, {len(rec['reports'])} clips, subject-1-10 "
-                          "weights)", "HumanAct12", rec, "at least 85")
+    lines = _samples_part(f"Real generator samples (Action2Motion xyz VAE, {len(rec['reports'])} clips, default "
+                          "refiner)", "HumanAct12", rec, "at least 85")
     if "ntu13" in rec:
         ntu = rec["ntu13"]
         lines += [""] + _samples_part(f"NTU13 samples (Action2Motion xyz VAE, 18 joints, skeleton 'uestc', "
-                                      f"{ntu['clips']} clips; refined through the HumanAct12 weights with the action "
-                                      "unknown)", "NTU13", ntu, "not lower")
+                                      f"{ntu['clips']} clips; refined through HumanAct12's motion model with the "
+                                      "action unknown)", "NTU13", ntu, "not lower")
     else:
         lines += ["", f"({rec['ntu13_skipped']})"]
     return "\n".join(lines)
@@ -244,9 +244,10 @@ def _skeletons(rec: dict) -> str:
     lines = [
         f"## Skeletons (HumanAct12 subjects 11-12, every {rec['stride']}th clip: {rec['clips']} clips, "
         "converted to each layout; severity 2; action unknown)", "",
-        "`weights`: the dataset the skeleton's refiner was trained on (`humanact12, converted`: through the "
-        "HumanAct12 weights, `ConvertedRefiner`). A skeleton whose weights were trained on another dataset scores "
-        "motion they never saw here (a transfer figure); a section below scores its weights' own held-out subjects.", "",
+        "The default refiner, `MotionRefiner.pretrained(skeleton)`. `weights`: the skeleton whose motion model refines "
+        "it (`humanact12, converted`: through HumanAct12's, converted in and the change converted back). A skeleton "
+        "whose model was trained on another dataset scores motion it never saw here (a transfer figure); a section "
+        "below scores its model's own held-out subjects.", "",
         markdown_table(["skeleton", "weights", "clean: MPJPE change cm", "clean: share of clips changed",
                         *[f"{f}: % removed" for f in names], "mean % removed"], rows)]
     for skel, r in rec.get("native", {}).items():
@@ -260,7 +261,89 @@ def _skeletons(rec: dict) -> str:
                                    *[r["removed_pct"][f] for f in fams], r["mean_removed_pct"]]]), "",
                   f"{r['dataset']} recogniser accuracy: clean {acc['clean']:.1f} %, flawed {acc['flawed']:.1f} %, "
                   f"refined {acc['refined']:.1f} % (mean over families). Weights' licence: {r['licence']}"]
+    skipped = [f"- `{skel}` skipped: {why}" for skel, why in rec.get("skipped", {}).items()]
+    lines += [""] + skipped if skipped else []
     return "\n".join(lines + ["", f"{rec['seconds']:.0f} s wall."])
+
+
+# ----------------------------------------------------------------------------------------------
+# noharm
+
+
+def _noharm_figures(row: dict) -> list:
+    acc = row.get("accuracy_pct")
+    return [f"{row['jerk']:.1f}", f"{100 * row['foot_skating']:.2f}", f"{row['penetration_cm']:.3f}",
+            f"{row['floating_cm']:.2f}", f"{row['bone_length_variation_pct']:.2f}",
+            "-" if acc is None else f"{acc:.1f} ± {row['accuracy_std_pct']:.1f}"]
+
+
+_NOHARM_RULES = {"relative": "{} after > before × (1 + {:g})", "up": "{} after > before + {:g}",
+                 "level": "{} after > before and ≥ {:g}", "down": "{} after < before − {:g}"}
+
+
+def _noharm_set(payload: dict) -> str:
+    v = payload["verdict"]["violated"]
+    return f"  {payload['name']}: " + (f"worse after refinement: {', '.join(v)}" if v else "no harm")
+
+
+def _noharm(rec: dict) -> str:
+    header = ["set", "row", "clips", "jerk m/s³", "foot skating %", "penetration cm", "floating cm",
+              "bone-length variation %", "accuracy %", "cm moved", "cm moved (changed frames)", "frames changed %",
+              "clips changed %", "seconds", "worse after"]
+    rows = []
+    for name, s in rec["sets"].items():
+        a = s["after"]
+        rows.append([name, "before", s["clips"], *_noharm_figures(s["before"])] + [""] * 6)
+        rows.append([name, "after", s["clips"], *_noharm_figures(a), f"{a['cm_moved']:.3f}",
+                     f"{a['cm_moved_changed_frames']:.3f}", f"{100 * a['frames_changed']:.1f}",
+                     f"{100 * a['clips_changed']:.1f}", f"{a['seconds']:.2f}",
+                     ", ".join(s["verdict"]["violated"]) or "none"])
+    for skel, r in rec["real"].items():
+        rows.append([f"real {skel}", r.get("source", r.get("none", "")), r.get("clips", "-"),
+                     *(_noharm_figures(r) if "jerk" in r else ["-"] * 6)] + [""] * 6)
+    t = rec["thresholds"]
+    notes = [f"- `{n}`: {s['note']}" for n, s in rec["sets"].items() if s["note"]]
+    notes += [f"- `{n}` skipped: {why}" for n, why in rec["skipped"].items()]
+    return "\n".join([
+        f"## No harm (generated clips before and after refinement; refiner {rec['refiner']})", "",
+        f"Means over clips at {t['fps']:g} fps. Foot skating: share of frame pairs in which a foot within "
+        f"{100 * t['contact_height_m']:g} cm of the ground (both frames) moves faster than "
+        f"{t['skating_speed_m_s']:g} m/s horizontally, in the pair and over {t['skating_window_frames']} pairs "
+        "(GMD). Ground: the lowest height a clip's ankles and feet reach; after rows use the before clip's. "
+        "Floating: lowest joint above the ground "
+        f"less {1000 * t['floating_tolerance_m']:g} mm. Accuracy: the set's Action2Motion recogniser, mean ± std over "
+        f"{rec['n_hidden']} random hidden states. A frame is changed when a joint moved more than "
+        f"{1000 * t['changed_frame_m']:g} mm. Worse after (verdict): " + "; ".join(
+            _NOHARM_RULES[r["kind"]].format(k, r["tolerance"]) for k, r in rec["tolerances"].items()) + ".", "",
+        markdown_table(header, rows), "", *notes, *([""] if notes else []), f"{rec['seconds']:.0f} s wall."])
+
+
+# ----------------------------------------------------------------------------------------------
+# heldout
+
+
+def _heldout_row(name: str, r: dict) -> list:
+    return [name, r.get("family", "blind"), r["weights"], f"{r['added_cm']:.2f}", f"{r['refined']:+.1f}",
+            f"{r['linear']:+.1f}", "0.0", f"{100 * r['clips_touched']:.0f}"]
+
+
+def _heldout(rec: dict) -> str:
+    header = ["mechanism", "family", "weights (never saw it)", "added error cm", "refined: % removed",
+              "linear in-fill, same flags", "as given", "clips touched %"]
+    rows = [_heldout_row(n, r) for n, r in rec["mechanisms"].items()] + [_heldout_row(n, r) for n, r in rec["blind"].items()]
+    fams = ", ".join(f"{f} {v:+.1f}" for f, v in rec["families"].items())
+    clean = "; ".join(f"{n}: {c['cm_moved']:.3f} cm, {100 * c['clips_touched']:.1f} % of clips touched" for n, c in rec["clean"].items())
+    return "\n".join([
+        f"## Held-out mechanisms (HumanAct12 subjects 11-12, {rec['clips']} clips)", "",
+        "Each mechanism is scored with the weights trained and calibrated without its fold; blind mechanisms (written "
+        "by someone who had not read the refiner) with the default weights. % of the added MPJPE removed.", "",
+        markdown_table(header, rows), "",
+        f"**Mean over held-out mechanisms: {rec['heldout_mean']:+.1f} %** (linear in-fill on the same flags "
+        f"{rec['linear_mean']:+.1f} %). Families: {fams}.", "", f"Clean clips: {clean}."])
+
+
+def _heldout_mechanism(payload: dict) -> str:
+    return f"  {payload['name']}: {payload['refined']:+.1f} % removed (linear {payload['linear']:+.1f} %)"
 
 
 #: Suite name -> the Markdown section of its record.
@@ -273,6 +356,8 @@ SECTIONS: dict[str, Callable[[dict], str]] = {
     "samples": _samples,
     "skeletons": _skeletons,
     "generators": _generators,
+    "noharm": _noharm,
+    "heldout": _heldout,
 }
 
 #: ``(suite, progress event)`` -> the line printed for its payload; events without an entry print nothing.
@@ -284,4 +369,6 @@ PROGRESS: dict[tuple[str, str], Callable[[dict], str]] = {
     ("speed", "device"): _speed_device,
     ("sanity", "comparison"): _sanity_comparison,
     ("generators", "row"): _generators_row,
+    ("noharm", "set"): _noharm_set,
+    ("heldout", "mechanism"): _heldout_mechanism,
 }

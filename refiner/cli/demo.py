@@ -3,8 +3,8 @@
 :func:`run_demo` wraps a shipped reference generator (:mod:`refiner.reference`) in a
 :class:`~refiner.refinement.refined_generator.RefinedGenerator`, samples one clip per HumanAct12 action, and writes
 for each action a before/after animation (GIF, plus MP4 when ffmpeg is on PATH), a key-frame
-strip with flagged anchors marked, a plot of the per-frame anchor probability with the anchors and
-flagged anchors, the motions as ``.npy`` and the refinement report as JSON. The HumanAct12
+strip with the changed frames (and any flagged anchors) marked, a plot of the per-frame flaw probability (the
+concepts method's: anchor probability) with its threshold, the motions as ``.npy`` and the refinement report as JSON. The HumanAct12
 recogniser (hidden state ``"fixed"``, so before and after see the same noise) scores each clip.
 """
 from __future__ import annotations
@@ -25,8 +25,8 @@ from refiner.cli.options import (GENERATOR_NAMES, GIF_DPI, GIF_PANEL_PX, gif_siz
 from refiner.core.validation import check_action
 from refiner.io.datasets import HUMANACT12_ACTIONS
 from refiner.plugins.manager import get_plugin_manager
-from refiner.refinement.learned_pipeline import flag_runs
 from refiner.refinement.refined_generator import RefinedGenerator
+from refiner.refinement.steps.base import runs
 
 __all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table", "demo_arguments",
            "demo_run"]
@@ -142,8 +142,8 @@ def run_demo(
     random_state : int, default=0
         Seed of the samples; action ``a`` uses ``random_state + a``.
     refiner : object, optional
-        Anything :class:`~refiner.refinement.refined_generator.RefinedGenerator` accepts; default
-        ``Refiner.pretrained("humanact12")``.
+        Anything :class:`~refiner.refinement.refined_generator.RefinedGenerator` accepts; default the default
+        refiner, ``MotionRefiner.pretrained("humanact12")``.
     mp4 : bool, optional
         Also write MP4 animations: None (default) when ffmpeg is on PATH.
     progress : bool, default=False
@@ -173,7 +173,7 @@ def run_demo(
     from refiner.evaluation.evaluators import load_recognizer
     from refiner.io import viz
     from refiner.reference import load_reference_generator
-    from refiner.refinement.pipeline import Refiner
+    from refiner.refinement.motion_refiner import MotionRefiner
 
     started = time.perf_counter()
     if isinstance(random_state, (bool, np.bool_)) or not isinstance(random_state, (int, np.integer)):
@@ -196,7 +196,7 @@ def run_demo(
     gen = load_reference_generator(generator, folder=generator_folder)
     pm = get_plugin_manager(autoload=False)
     if refiner is None:
-        refiner = Refiner.pretrained("humanact12")
+        refiner = MotionRefiner.pretrained("humanact12")
     wrapped = RefinedGenerator(gen, adapter=gen.adapter, refiner=refiner, skeleton="humanact12",
                                adapter_options=gen.adapter_options(), plugin_manager=pm)
     # The anchor detector's probability threshold, drawn on the score plots (0.5 for other refiners).
@@ -261,8 +261,7 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
     """Every file of one action; returns their names."""
     repaired = np.zeros(before.n_frames, bool)
     for change in report.changes:
-        if change["step"] != "skeleton":  # the rigid-skeleton step touches every frame; it is not a flaw
-            repaired[change["start"] : change["stop"]] = True
+        repaired[change["start"] : change["stop"]] = True
     flagged = sorted({int(f) for f in report.flagged_anchors} | set(np.flatnonzero(repaired).tolist()))
     np.save(out / f"{stem}_before.npy", before.joints)
     np.save(out / f"{stem}_after.npy", after.joints)
@@ -279,7 +278,7 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
                        title=f"{action}: key frames, generated (top) and refined (bottom)")
     # Name each plotted threshold by its quantity: the report's own `threshold` is, for the concepts
     # method, a pose-score threshold (report.threshold_quantity), not this anchor-probability one.
-    if report.flaw_probability:  # the learned method: per-frame flaw probability and its threshold
+    if report.flaw_probability:  # the motion method: per-frame flaw probability and its threshold
         probability, threshold, label = report.flaw_probability, report.threshold, "flaw probability"
     else:
         probability, threshold, label = report.anchor_probability, detect, "anchor probability"
@@ -296,11 +295,11 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
 
 def strip_frames(n_frames: int, flagged, n_keyframes: int) -> np.ndarray:
     """Frames a key-frame strip shows: ``n_keyframes`` evenly spaced ones and the middle frame of each of the
-    first ``n_keyframes`` runs of ``flagged`` frames. Not every flagged frame: a generator's clip is often changed
-    throughout (its noise, the pose prior), and a strip of 60 panels shows nothing."""
+    first ``n_keyframes`` runs of ``flagged`` frames. Not every flagged frame: a clip may be changed over long runs,
+    and a strip of 60 panels shows nothing."""
     mask = np.zeros(n_frames, bool)
     mask[np.asarray(flagged, int)] = True
-    middles = [(a + b - 1) // 2 for a, b in flag_runs(mask.astype(np.float64), 0.5, min_run=1, margin=0)]
+    middles = [(a + b - 1) // 2 for a, b in runs(mask)]
     even = np.round(np.linspace(0, n_frames - 1, min(n_keyframes, n_frames))).astype(int)
     return np.union1d(even, np.asarray(middles[:n_keyframes], int))
 

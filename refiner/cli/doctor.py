@@ -40,6 +40,17 @@ def diagnose() -> dict:
     }
 
 
+def _motion_models(folder: Path, manifest: dict) -> dict:
+    """The motion models a ``<skeleton>-motion`` folder lists, each checked against its sha256 (``ValueError``)."""
+    paths = {}
+    for name, entry in manifest.get("models", {}).items():
+        path = folder / entry["file"]
+        if not path.is_file() or mf.file_sha256(path) != entry["sha256"]:
+            raise ValueError(f"{str(path)!r} is missing or does not match the sha256 in its manifest.")
+        paths[name] = path
+    return paths
+
+
 def _weights_folder(folder: Path) -> dict:
     """One shipped weights folder: its kind, what it lists and whether its manifest and files verify."""
     row = {"name": folder.name, "path": str(folder), "kind": "unknown", "entries": [], "verified": False,
@@ -50,6 +61,8 @@ def _weights_folder(folder: Path) -> dict:
             row["kind"], (_, paths) = "reference generators", mf.read_generator_manifest(folder)
         elif "evaluators" in listed:
             row["kind"], (_, paths) = "evaluators", mf.read_evaluator_manifest(folder)
+        elif listed.get("kind") == "motion_model":
+            row["kind"], paths = "motion model (default refiner)", _motion_models(folder, listed)
         else:
             from refiner.refinement.pipeline import _PARTS  # imports torch: only for a refiner folder
 

@@ -18,13 +18,16 @@ from refiner.cli.doctor import doctor_arguments, doctor_run
 from refiner.cli.refine import refine_arguments, refine_run
 from refiner.cli.train import train_arguments, train_run
 from refiner.cli.train_generator import train_generator_arguments, train_generator_run
+from refiner.cli.train_motion import train_motion_arguments, train_motion_run
 
 __all__ = ["main", "build_parser", "COMMANDS"]
 
 #: Sub-command -> (help, add its arguments to a parser, run it with the parsed arguments -> exit code).
 COMMANDS: dict[str, tuple[str, Callable, Callable]] = {
     "concepts": ("learn motion concepts from a dataset", concepts_arguments, concepts_run),
-    "train": ("train the refiner's networks on a dataset", train_arguments, train_run),
+    "train-motion": ("train the default refiner's motion model (resumable) and write its weight set",
+                     train_motion_arguments, train_motion_run),
+    "train": ("train the concepts method's refiner on a dataset", train_arguments, train_run),
     "bench": ("run benchmarks and print figures", bench_arguments, bench_run),
     "adapters": ("list installed generator adapters", adapters_arguments, adapters_run),
     "demo": ("sample every action from a reference generator, refine, write pictures and a table",

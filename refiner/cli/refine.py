@@ -39,18 +39,17 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
                    help="adapter option, repeatable (e.g. representation=lie); VALUE is parsed as JSON when it can be")
     p.add_argument("--skeleton", default="humanact12", help="skeleton of the joints / adapter target")
     p.add_argument("--action", default=None, help="action name or index for every clip (default: inferred)")
-    p.add_argument("--mode", default="full", choices=["full", "anchor", "transition"])
+    p.add_argument("--method", default=None, choices=["motion", "concepts"],
+                   help="motion (the default): the learned motion model; concepts: the paper's method (anchor scores "
+                        "and transition residuals); default: motion, concepts with --refiner")
+    p.add_argument("--mode", default=None, choices=["full", "anchor", "transition"],
+                   help="with --method concepts: which of its steps run (default full)")
     p.add_argument("--fps", type=float, default=20.0, help="frame rate of joint files (default 20)")
-    p.add_argument("--refiner", type=Path, default=None, help="folder of a saved refiner (default: shipped weights)")
+    p.add_argument("--refiner", type=Path, default=None,
+                   help="folder of a saved concepts refiner (`motion-refiner train`; default: shipped weights)")
     p.add_argument("--concept-snap", type=float, default=0.0, metavar="W",
-                   help="move every anchor W of the way (0-1) onto its action's nearest anchor concept; needs "
-                        "--action; realism over fidelity (default 0: off)")
-    p.add_argument("--misread-snap", type=float, default=None, metavar="W",
-                   help="snap W (0-1) of the way onto its action's anchor concepts each clip of a given --action that "
-                        "reads as another action; default: 1 with --adapter (raw generator output), else 0")
-    p.add_argument("--texture", default=None, choices=["auto", "all", "off"],
-                   help="clips through the texture filter: those noisy throughout (auto), every clip (all: generator "
-                        "output), none (off); default: all with --adapter (raw generator output), else off")
+                   help="with --method concepts: move every anchor W of the way (0-1) onto its action's nearest anchor "
+                        "concept; needs --action; realism over fidelity (default 0: off)")
     p.add_argument("--report", action="store_true", help="write <out>.report.json next to each output")
     p.add_argument("--gif", action="store_true", help="write a before/after <out>.gif next to each output")
     gif_size_argument(p)
@@ -60,9 +59,14 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def refine_run(args: argparse.Namespace) -> int:
-    from refiner.refinement.inputs import GENERATOR_OPTIONS  # these import torch: here, so that --help stays cheap
-    from refiner.refinement.pipeline import Refiner
-
+    method = args.method or ("concepts" if args.refiner is not None else "motion")
+    if method == "motion":  # the options of the concepts method, refused before anything is read
+        given = [name for name, on in (("--refiner", args.refiner is not None), ("--mode", args.mode is not None),
+                                       ("--concept-snap", bool(args.concept_snap))) if on]
+        if given:
+            raise ValueError(f"{', '.join(given)} belong{'s' * (len(given) == 1)} to `--method concepts`; the default "
+                             "method, motion, has neither modes nor a concept snap.")
+    args.mode = args.mode or "full"
     set_threads(args.threads)
     skeleton = get_skeleton(args.skeleton).name
     options = _parse_options(args.option)
@@ -89,11 +93,7 @@ def refine_run(args: argparse.Namespace) -> int:
         raise ValueError(f"IN {str(args.input)!r} does not exist.")
     if args.concept_snap and args.action is None:  # an inferred action is never snapped to: it would do nothing
         raise ValueError("`--concept-snap` needs `--action`: the anchors are snapped onto that action's concepts.")
-    snap = {"concept_snap": args.concept_snap} if args.concept_snap else {}
-    snap.update(GENERATOR_OPTIONS if args.adapter is not None else {})  # an adapter's input is generated
-    snap.update({} if args.texture is None else {"texture": args.texture})
-    snap.update({} if args.misread_snap is None else {"misread_snap": args.misread_snap})
-    refiner = Refiner.load(args.refiner, **snap) if args.refiner is not None else Refiner.pretrained(skeleton, **snap)
+    refiner = _load_refiner(method, args.refiner, skeleton, args.concept_snap)
     pm = get_plugin_manager() if args.adapter is not None else None
     if pm is not None:
         pm.get_adapter(args.adapter)  # an unknown adapter is a usage error, not a per-file failure
@@ -122,6 +122,19 @@ def refine_run(args: argparse.Namespace) -> int:
     print(f"refined {done} of {len(inputs)} file(s), {changed_total} of {frames_total} frames changed"
           + (f"; {len(failed)} failed: " + ", ".join(p.name for p in failed) if failed else ""))
     return 1 if failed else 0
+
+
+def _load_refiner(method: str, folder: Path | None, skeleton: str, concept_snap: float):
+    """The refiner of ``method``: the shipped one for ``skeleton``, or the concepts refiner saved in ``folder``."""
+    # these import torch: here, so that --help stays cheap
+    if method == "motion":
+        from refiner.refinement.motion_refiner import MotionRefiner
+
+        return MotionRefiner.pretrained(skeleton)
+    from refiner.refinement.pipeline import Refiner
+
+    snap = {"concept_snap": concept_snap} if concept_snap else {}
+    return Refiner.load(folder, **snap) if folder is not None else Refiner.pretrained(skeleton, **snap)
 
 
 def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12", options: dict | None = None,
@@ -225,8 +238,8 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
         np.save(main_out, stacked if batched else stacked[0])
     written = [main_out]
     if args.report:
-        payload = {"input": str(path), "output": str(main_out), "adapter": args.adapter, "mode": args.mode,
-                   "skeleton": skeleton, "clips": [r.to_dict() for r in reports]}
+        payload = {"input": str(path), "output": str(main_out), "adapter": args.adapter, "method": refiner.method,
+                   "mode": args.mode, "skeleton": skeleton, "clips": [r.to_dict() for r in reports]}
         Path(f"{stem}.report.json").write_text(json.dumps(payload, indent=1) + "\n")
         written.append(Path(f"{stem}.report.json"))
     if args.gif:

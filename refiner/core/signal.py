@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["norms", "smoothstep", "resample", "linear_infill", "window_starts", "triangular_weights", "overlap_add", "run_peak"]
+__all__ = ["norms", "smoothstep", "resample", "linear_infill", "window_starts", "overlap_add"]
 
 
 def norms(v: np.ndarray) -> np.ndarray:
@@ -60,11 +60,6 @@ def window_starts(n_frames: int, size: int, stride: int) -> list[int]:
     return starts
 
 
-def triangular_weights(size: int) -> np.ndarray:
-    """``(size,)`` blend weights rising 1, 2, ... from both ends of a window: its middle counts most."""
-    return np.minimum(np.arange(1, size + 1), np.arange(size, 0, -1)).astype(np.float64)
-
-
 def overlap_add(windows: np.ndarray, starts, n_frames: int, weights: np.ndarray | None = None) -> np.ndarray:
     """Blend per-frame outputs of overlapping windows back into one sequence.
 
@@ -93,11 +88,3 @@ def overlap_add(windows: np.ndarray, starts, n_frames: int, weights: np.ndarray 
         total[s : s + size] += weights.reshape((size,) + per_frame) * windows[k]
         wsum[s : s + size] += weights
     return total / wsum.reshape((n_frames,) + per_frame)
-
-
-def run_peak(values: np.ndarray, min_run: int) -> float:
-    """The largest value that ``min_run`` consecutive entries of ``values (T,)`` all reach."""
-    if len(values) < min_run:
-        return float(values.min())
-    windows = np.lib.stride_tricks.sliding_window_view(values, min_run)
-    return float(windows.min(-1).max())

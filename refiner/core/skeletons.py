@@ -1,5 +1,5 @@
 """Skeleton registry: joint names, parents and coordinate conventions of every supported layout;
-bone lengths; the rigid-skeleton step lives in :mod:`refiner.core.rigid` (its names are importable from here).
+bone lengths; conversions between layouts live in :mod:`refiner.core.skeleton_conversion` (importable from here).
 
 Tables follow ``generator_formats.md`` section 1 (HumanAct12 / SMPL 24, NTU-VIBE 18 used for UESTC,
 HumanML3D 22) and Action2Motion's CMU-Mocap chain (20 joints).
@@ -20,9 +20,6 @@ __all__ = [
     "list_skeletons",
     "register_skeleton",
     "bone_lengths",
-    "rigid_skeleton",
-    "BoneProportions",
-    "robust_bone_lengths",
     "convert",
     "estimated_joints",
 ]
@@ -255,6 +252,5 @@ register_skeleton(Skeleton(
 ))
 
 
-# the rigid step and the conversions need the registry above; imported last so that their names live here too
-from refiner.core.rigid import BoneProportions, rigid_skeleton, robust_bone_lengths  # noqa: E402
+# the conversions need the registry above; imported last so that their names live here too
 from refiner.core.skeleton_conversion import convert, estimated_joints  # noqa: E402

@@ -17,7 +17,6 @@ __all__ = [
     "NotFittedError",
     "check_is_fitted",
     "check_joints",
-    "check_joint_batch",
     "check_action",
     "check_random_state",
     "to_numpy",
@@ -101,17 +100,6 @@ def check_joints(
         )
         raise ValueError(f"`{name}` contains {n_nan} NaN and {n_inf} Inf values (first at {where}).")
     return arr
-
-
-def check_joint_batch(joints, n_joints: int) -> np.ndarray:
-    """A finite batch ``(B, T, n_joints, 3)`` as a new float32 array; ``ValueError`` naming the problem otherwise
-    (the networks' own entry check, after :func:`check_joints` has checked the user's input)."""
-    x = np.array(joints, np.float32)
-    if x.ndim != 4 or x.shape[2:] != (n_joints, 3):
-        raise ValueError(f"`joints` must be (B, T, {n_joints}, 3); got shape {x.shape}.")
-    if not np.isfinite(x).all():
-        raise ValueError("`joints` must be finite; got NaN or Inf.")
-    return x
 
 
 def check_action(action, actions: Sequence[str], *, name: str = "action") -> int:

@@ -2,7 +2,7 @@
 
 Every refiner has one method, ``refine(motion, *, action=None) -> Motion``, returning a new clip of
 the same length, skeleton and fps; hyper-parameters are set in ``__init__`` and validated on use
-(scikit-learn convention). ``action`` is accepted for interface parity with the concept refiner and
+(scikit-learn convention). ``action`` is accepted for interface parity with the refiners that read it and
 ignored by the baselines.
 """
 from __future__ import annotations
@@ -139,7 +139,8 @@ class SplineFitRefiner(_Refiner):
 
 
 class PipelineRefiner:
-    """The concept refiner (``refiner.refinement.pipeline.Refiner.pretrained()``) in one mode, with the baseline interface.
+    """The concepts method's refiner (``refiner.refinement.pipeline.Refiner.pretrained()``) in one mode, with the baseline
+    interface.
 
     Parameters
     ----------
@@ -170,23 +171,30 @@ class PipelineRefiner:
         return f"PipelineRefiner(mode={self.mode!r}{extra})"
 
 
+def _motion_refiner(weights=None):
+    """The default refiner, ``MotionRefiner.pretrained("humanact12", weights=weights)``: its model learned on subjects
+    1-8 and was calibrated on 9-10, so the benchmark's subjects 11-12 are new to it."""
+    from refiner.refinement.motion_refiner import MotionRefiner  # imports torch: here, so that importing stays cheap
+
+    return MotionRefiner.pretrained("humanact12", weights=weights)
+
+
 #: Refiners compared by ``motion-refiner bench flaws``: name -> factory of keyword ``weights`` (a folder of weight sets
-#: looked in before the shipped ones; the baselines have none). The ``ours_*``
-#: factories load the weights trained on subjects 1-10 only (``split="train"``), since the benchmark
-#: runs on subjects 11-12; they raise (ValueError without those weights) and the bench then skips
-#: them with a note. ``ours_full`` is the default (learned) refiner; ``ours_infill`` its in-filling
-#: variant; ``ours_concepts`` the anchor-score / transition-residual pipeline with the paper's parts;
-#: ``ours_concept_snap`` the default with the concept-snap option (every anchor moved onto a concept).
+#: looked in before the shipped ones; the baselines have none). ``ours_full`` is the default refiner (the motion
+#: model, :func:`_motion_refiner`); the other ``ours_*`` are the concepts method (the paper's) with the weights trained
+#: on subjects 1-10 only (``split="train"``), since the benchmark runs on subjects 11-12: ``ours_anchor`` and
+#: ``ours_transition`` its anchor and transition refinement alone, ``ours_concepts`` both, ``ours_concept_snap`` both
+#: with the concept-snap option (every anchor moved onto a concept). A factory that raises (ValueError without its
+#: weights) makes the bench skip that row with a note.
 FLAW_REFINERS: dict[str, Callable[..., object]] = {
     "identity": lambda weights=None: IdentityRefiner(),
     "savgol": lambda weights=None: SavgolRefiner(),
     "gaussian": lambda weights=None: GaussianRefiner(),
     "spline_fit": lambda weights=None: SplineFitRefiner(),
-    "ours_full": lambda weights=None: PipelineRefiner("full", split="train", weights=weights),
+    "ours_full": _motion_refiner,
     "ours_anchor": lambda weights=None: PipelineRefiner("anchor", split="train", weights=weights),
     "ours_transition": lambda weights=None: PipelineRefiner("transition", split="train", weights=weights),
-    "ours_infill": lambda weights=None: PipelineRefiner("full", split="train", repair="infill", weights=weights),
-    "ours_concepts": lambda weights=None: PipelineRefiner("full", split="train", method="concepts", weights=weights),
+    "ours_concepts": lambda weights=None: PipelineRefiner("full", split="train", weights=weights),
     "ours_concept_snap": lambda weights=None: PipelineRefiner("full", split="train", concept_snap=1.0, weights=weights),
 }
 

@@ -6,8 +6,8 @@ The suites print nothing: the command line (:mod:`refiner.cli.bench`) prints the
 and writes ``REPORT.md``. Each suite is a module of its own, its record described there:
 :mod:`~refiner.evaluation.bench_concepts`, :mod:`~refiner.evaluation.bench_refiner` (``refiner`` and
 ``speed``), :mod:`~refiner.evaluation.bench_sanity`, :mod:`~refiner.evaluation.bench_flaws`,
-:mod:`~refiner.evaluation.bench_samples`, :mod:`~refiner.evaluation.bench_skeletons` and
-:mod:`~refiner.evaluation.bench_generators`.
+:mod:`~refiner.evaluation.bench_samples`, :mod:`~refiner.evaluation.bench_skeletons`,
+:mod:`~refiner.evaluation.bench_generators` and :mod:`~refiner.evaluation.bench_noharm`.
 """
 from __future__ import annotations
 
@@ -16,6 +16,8 @@ from typing import Callable
 from refiner.evaluation.bench_concepts import bench_concepts
 from refiner.evaluation.bench_flaws import bench_flaws
 from refiner.evaluation.bench_generators import bench_generators
+from refiner.evaluation.bench_heldout import bench_heldout
+from refiner.evaluation.bench_noharm import bench_noharm
 from refiner.evaluation.bench_refiner import bench_refiner, bench_speed
 from refiner.evaluation.bench_samples import bench_samples
 from refiner.evaluation.bench_sanity import bench_sanity
@@ -30,10 +32,12 @@ __all__ = [
     "bench_refiner",
     "bench_speed",
     "bench_sanity",
+    "bench_heldout",
     "bench_flaws",
     "bench_samples",
     "bench_skeletons",
     "bench_generators",
+    "bench_noharm",
 ]
 
 #: Suite name (``motion-refiner bench NAME``) -> suite, in the order ``bench all`` runs them.
@@ -42,8 +46,10 @@ SUITES: dict[str, Callable[..., dict]] = {
     "refiner": bench_refiner,
     "speed": bench_speed,
     "sanity": bench_sanity,
+    "heldout": bench_heldout,
     "flaws": bench_flaws,
     "samples": bench_samples,
     "skeletons": bench_skeletons,
     "generators": bench_generators,
+    "noharm": bench_noharm,
 }

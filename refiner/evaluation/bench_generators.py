@@ -2,12 +2,12 @@
 
 The record (``generators.json``): ``per_action`` (samples per HumanAct12 action), ``n_replications``,
 ``reference_clips`` (real clips of subjects 11-12) and ``rows``: per ``<kind>/generated``,
-``<kind>/refined`` (as :class:`~refiner.refinement.refined_generator.RefinedGenerator` refines: ``texture="all"``),
-``<kind>/snapped`` (the same with the concept-snap option, ``concept_snap=1``) and ``real``
+``<kind>/refined`` (by the default refiner, ``MotionRefiner.pretrained``, as
+:class:`~refiner.refinement.refined_generator.RefinedGenerator` refines) and ``real``
 (train clips of subjects 1-10), ``samples``, ``metrics``
 (:func:`~refiner.evaluation.protocol.evaluate` summary, metric -> ``[mean, 95 % half-width]``) and
 ``physics`` (:func:`physical_record`: mean joint acceleration m/s², foot-skating ratio, bone-length
-variation); refined and snapped rows also ``frames_changed`` (share), ``flagged_anchors_per_clip`` and
+variation); refined rows also ``frames_changed`` (share), ``changes_per_clip`` (the reports' changes) and
 ``refine_seconds_per_clip``.
 """
 from __future__ import annotations
@@ -47,20 +47,18 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, weight
 
     ``quick``: 3 samples per action, 2 replications and, for a diffusion generator, 10 sampling steps instead of
     its own (else the paper's Table 1 protocol and the generators as shipped). Progress
-    event ``"row"``: ``kind``, ``label`` (generated, refined or snapped) and ``metrics`` of each generator row.
+    event ``"row"``: ``kind``, ``label`` (generated or refined) and ``metrics`` of each generator row.
     ``weights``: a folder of weight sets looked in before the shipped ones.
     """
     # these import torch: here, so that importing the suites (``motion-refiner --help``) stays cheap
     from refiner.reference import GENERATOR_KINDS, load_reference_generator
-    from refiner.refinement.pipeline import Refiner
-    from refiner.refinement.inputs import GENERATOR_OPTIONS
+    from refiner.refinement.motion_refiner import MotionRefiner
 
     progress = progress or ignore_progress
     dataset, recognizer = load_humanact12_and_recognizer(data, hidden="random")
     real = dataset.split("test")
-    # as RefinedGenerator refines a generator's clips: every one through the texture filter (texture="all")
-    refiners = {"refined": Refiner.pretrained("humanact12", split="train", weights=weights, **GENERATOR_OPTIONS),
-                "snapped": Refiner.pretrained("humanact12", split="train", weights=weights, **GENERATOR_OPTIONS, concept_snap=1.0)}
+    # as RefinedGenerator refines a generator's clips: the default refiner
+    refiners = {"refined": MotionRefiner.pretrained("humanact12", weights=weights)}
     # the paper's Table 1 protocol: 3,000 samples (250 per action), 20 replications
     per_action, n_rep = (3, 2) if quick else (250, 20)
     n_actions = len(dataset.action_names)
@@ -84,7 +82,7 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, weight
                                                     "physics": physical_record(motions)}
             if reports is not None:
                 row.update(frames_changed=float(np.mean([r.changed_frames.mean() for r in reports])),
-                           flagged_anchors_per_clip=float(np.mean([len(r.flagged_anchors) for r in reports])),
+                           changes_per_clip=float(np.mean([len(r.changes) for r in reports])),
                            refine_seconds_per_clip=seconds / len(before))
             progress("row", {"kind": kind, "label": label, "metrics": row["metrics"]})
     s = evaluate(recognizer, dataset.split("train").motions, real.motions, n_replications=n_rep,

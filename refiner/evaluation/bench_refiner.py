@@ -1,14 +1,16 @@
 """``motion-refiner bench refiner`` and ``bench speed``: the shipped refiner's figures on held-out clips.
 
-Both suites follow :mod:`refiner.evaluation.bench_setup`: they return their record and, with ``out``, write
-it as ``refiner.json`` / ``speed.json``. ``refiner.json``: ``clips``, ``parameters`` (per part and total),
-(a) ``real_mpjpe_change_cm`` and ``real_clips_changed``, (b) ``boundary_acceleration`` (``boundaries``,
-``real_p99``, ``max``, ``median``, ``above_real_p99``; m/s²), (c) ``anchor_precision`` and
-``anchor_recall`` (±2 frames of the segmentation's anchors), (d) ``latency`` (``clips``, ``threads``,
-``median_ms``, ``p90_ms``) and ``anchor_quality_auc`` (per flaw family: ``pairs``, ROC AUC of the
-``pose`` mixture and of the ``encoder``-feature GMM). ``speed.json``: ``clips``, ``batch``,
-``devices`` (per device: ``name``, ``median_ms``, ``p90_ms``, ``clips_per_s``, ``peak_mib``, ``peak_of``)
-and ``parameters``.
+The refiner measured is the default, ``MotionRefiner.pretrained("humanact12")`` (its model learned on subjects 1-8 and
+was calibrated on 9-10); the anchor figures are the concepts method's (``Refiner.pretrained("humanact12",
+split="train")``, subjects 1-10). Both suites follow :mod:`refiner.evaluation.bench_setup`: they return their record
+and, with ``out``, write it as ``refiner.json`` / ``speed.json``. ``refiner.json``: ``clips``, ``parameters`` (per
+part and total, the default refiner's), (a) ``real_mpjpe_change_cm`` and ``real_clips_changed``, (b)
+``boundary_acceleration`` (``boundaries``, ``real_p99``, ``max``, ``median``, ``above_real_p99``; m/s²), (c)
+``anchor_precision`` and ``anchor_recall`` (the concepts method's anchor recognition, ±2 frames of the segmentation's
+anchors), (d) ``latency`` (``clips``, ``threads``, ``median_ms``, ``p90_ms``) and ``anchor_quality_auc`` (the concepts
+method's anchor scores, per flaw family: ``pairs``, ROC AUC of the ``pose`` mixture and of the ``encoder``-feature
+GMM). ``speed.json``: ``clips``, ``batch``, ``devices`` (per device: ``name``, ``median_ms``, ``p90_ms``,
+``clips_per_s``, ``peak_mib``, ``peak_of``) and ``parameters``.
 """
 from __future__ import annotations
 
@@ -19,24 +21,29 @@ from pathlib import Path
 import numpy as np
 
 from refiner.concepts.segmentation import segment
-from refiner.core.manifest import weight_set_folders
 from refiner.evaluation.bench_setup import Progress, ignore_progress, load_bench_humanact12, one_thread, write_record
 from refiner.evaluation.flaws import corrupt
 from refiner.evaluation.physics import boundary_velocity_jump
 
-__all__ = ["bench_refiner", "bench_speed"]
+__all__ = ["bench_refiner", "bench_speed", "motion_parameters"]
+
+
+def motion_parameters(refiner) -> dict:
+    """A :class:`~refiner.refinement.motion_refiner.MotionRefiner`'s network parameters, ``motion_model`` and ``total``."""
+    n = sum(p.numel() for p in refiner.model.network_.parameters())
+    return {"motion_model": n, "total": n}
 
 
 @one_thread()
 def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
                   progress: Progress | None = None) -> dict:
-    """Issue-3 figures for the shipped subject-1-10 weights (``weights``: a folder of weight sets looked in first) on
-    held-out subjects 11-12.
+    """Issue-3 figures for the default refiner and the concepts method's subject-1-10 weights (``weights``: a folder of
+    weight sets looked in first) on held-out subjects 11-12.
 
     (a) how much real clips change, (b) velocity jumps where refined windows meet kept frames
-    against real data's 99th percentile, (c) precision / recall of the anchors the refiner finds
+    against real data's 99th percentile, (c) precision / recall of the anchors the concepts method's recogniser finds
     against the segmentation's (the table calls them "anchor recognition"), (d) refine latency per
-    60-frame clip (CPU, batch 1), parameter counts, and the anchor-quality comparison behind the
+    60-frame clip (CPU, batch 1), parameter counts, and the anchor-quality comparison behind the concepts method's
     ``quality`` default (pose mixture vs the paper's encoder-feature GMM, ROC AUC on seeded anchor
     flaws). Runs on one thread
     (:func:`~refiner.evaluation.bench_setup.one_thread`), as ``refine`` itself does. ``quick`` keeps every
@@ -49,14 +56,15 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: 
     from sklearn.metrics import roc_auc_score
 
     from refiner.refinement.anchor_recognition import match_anchors
+    from refiner.refinement.motion_refiner import MotionRefiner
     from refiner.refinement.pipeline import Refiner
 
     progress = progress or ignore_progress
     test = load_bench_humanact12(data).split("test")
     clips = test.motions[:: (16 if quick else 1)]
-    model = Refiner.pretrained("humanact12", split="train", weights=weights)
-    counts = model.n_parameters()
-    rec = {"clips": len(clips), "parameters": counts}
+    model = MotionRefiner.pretrained("humanact12", weights=weights)
+    concepts = Refiner.pretrained("humanact12", split="train", weights=weights)
+    rec = {"clips": len(clips), "parameters": motion_parameters(model)}
 
     segs = [segment(m.joints) for m in clips]
     change, frames, n_changed, tp, n_pred, n_ref = 0.0, 0, 0, 0, 0, 0
@@ -66,7 +74,7 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: 
         err = np.linalg.norm(refined.joints - m.joints, axis=-1).mean(-1)
         change, frames = change + err.sum(), frames + m.n_frames
         n_changed += bool(report.changes)
-        counts_ = match_anchors(report.anchors, seg.anchors)
+        counts_ = match_anchors(concepts.recognizer.recognize(m.joints).anchors, seg.anchors)
         tp, n_pred, n_ref = tp + counts_[0], n_pred + counts_[1], n_ref + counts_[2]
     real_acc = np.concatenate([np.linalg.norm(np.diff(m.joints, 2, axis=0), axis=-1).max(-1) * m.fps ** 2
                                for m in clips])
@@ -96,7 +104,7 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: 
         t0 = time.perf_counter()
         model.refine(x)
         times.append(time.perf_counter() - t0)
-    rec["latency"] = {"clips": len(times), "threads": model.threads_for(window[0]) or torch.get_num_threads(),
+    rec["latency"] = {"clips": len(times), "threads": model.threads or torch.get_num_threads(),
                       "median_ms": float(1000 * np.median(times)), "p90_ms": float(1000 * np.percentile(times, 90))}
     progress("latency", rec)
 
@@ -115,8 +123,8 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: 
             k_real = int(rng.integers(1, len(a) - 1))
             for clip, k, label in ((m.joints, k_real, 0), (bad.joints, k_bad, 1)):
                 labels.append(label)
-                pose_s.append(-model.anchor_quality.score(clip[a[k]][None], m.action)[0])
-                enc_s.append(-model.recognizer.recognize(clip, anchors=a).scores[k])
+                pose_s.append(-concepts.anchor_quality.score(clip[a[k]][None], m.action)[0])
+                enc_s.append(-concepts.recognizer.recognize(clip, anchors=a).scores[k])
         rec["anchor_quality_auc"][family] = {"pairs": len(labels) // 2, "pose": float(roc_auc_score(labels, pose_s)),
                                              "encoder": float(roc_auc_score(labels, enc_s))}
     return write_record(out, "refiner", rec)
@@ -124,50 +132,41 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: 
 
 def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
                 progress: Progress | None = None) -> dict:
-    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters, CPU and CUDA.
+    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters of the default refiner.
 
-    ``quick``: 8 clips and batches of 8 (else 64 and 256). Progress event ``"device"``: each row of
-    ``devices`` as it is measured.
+    The motion model runs on the CPU (``MotionRefiner`` has no device option), so there is one row, ``cpu``.
+    ``quick``: 8 clips and batches of 8 (else 64 and 256). Progress event ``"device"``: each row of ``devices`` as it
+    is measured.
     """
     import torch  # here, not at the top: see bench_refiner
 
-    from refiner.refinement.pipeline import _WEIGHTS, Refiner
+    from refiner.refinement.motion_refiner import MotionRefiner
 
     progress = progress or ignore_progress
     clips = [m.joints[:60] for m in load_bench_humanact12(data).split("test") if m.n_frames >= 60][: (8 if quick else 64)]
-    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     batch_size = 8 if quick else 256
     rec = {"clips": len(clips), "batch": batch_size, "devices": []}
-    for device in devices:
-        # loaded afresh, not a copy of a cached refiner: the peak memory is one refiner's
-        model = Refiner.load(weight_set_folders("humanact12-train", [weights, _WEIGHTS] if weights else [_WEIGHTS])[0],
-                             device=device)
-        for x in clips[:3]:
-            model.refine(x)  # warm up (first calls allocate and compile kernels)
-        times = []
-        for x in clips:
-            t0 = time.perf_counter()
-            model.refine(x)
-            if device == "cuda":
-                torch.cuda.synchronize()
-            times.append(time.perf_counter() - t0)
-        batch = np.stack([clips[i % len(clips)] for i in range(batch_size)])
-        model.refine(batch[:8])
-        runs = []
-        for _ in range(1 if quick else 3):  # the median of three calls: one call is at the mercy of the machine
-            t0 = time.perf_counter()
-            model.refine(batch)
-            runs.append(time.perf_counter() - t0)
-        rec["devices"].append({
-            "device": device,
-            "name": (f"{model.threads_for(clips[0]) or torch.get_num_threads()} / "
-                     f"{model.threads_for(batch) or torch.get_num_threads()} threads (batch 1 / {batch_size})")
-            if device == "cpu" else torch.cuda.get_device_name(),
-            "median_ms": float(1000 * np.median(times)), "p90_ms": float(1000 * np.percentile(times, 90)),
-            "clips_per_s": len(batch) / float(np.median(runs)),
-            "peak_mib": float(torch.cuda.max_memory_allocated() / 2**20 if device == "cuda"
-                              else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
-            "peak_of": "CUDA" if device == "cuda" else "process RSS"})
-        progress("device", rec["devices"][-1])
-    rec["parameters"] = Refiner.pretrained("humanact12", split="train", weights=weights).n_parameters()
+    model = MotionRefiner.pretrained("humanact12", weights=weights)
+    for x in clips[:3]:
+        model.refine(x)  # warm up (first calls allocate)
+    times = []
+    for x in clips:
+        t0 = time.perf_counter()
+        model.refine(x)
+        times.append(time.perf_counter() - t0)
+    batch = np.stack([clips[i % len(clips)] for i in range(batch_size)])
+    model.refine(batch[:8])
+    runs = []
+    for _ in range(1 if quick else 3):  # the median of three calls: one call is at the mercy of the machine
+        t0 = time.perf_counter()
+        model.refine(batch)
+        runs.append(time.perf_counter() - t0)
+    threads = model.threads or torch.get_num_threads()
+    rec["devices"].append({
+        "device": "cpu", "name": f"{threads} / {threads} threads (batch 1 / {batch_size})",
+        "median_ms": float(1000 * np.median(times)), "p90_ms": float(1000 * np.percentile(times, 90)),
+        "clips_per_s": len(batch) / float(np.median(runs)),
+        "peak_mib": float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024), "peak_of": "process RSS"})
+    progress("device", rec["devices"][-1])
+    rec["parameters"] = motion_parameters(model)
     return write_record(out, "speed", rec)

@@ -2,15 +2,16 @@
 
 The real Action2Motion xyz-VAE samples in ``../shared/samples/action2motion`` (20 clips of 60
 frames with their labels) are converted by the ``action2motion`` adapter, refined with their
-labels by the subject-1-10 weights as :class:`~refiner.refinement.refined_generator.RefinedGenerator` refines
-(``texture="all"``), and scored: the HumanAct12 recogniser's accuracy (mean over
+labels by the default refiner (``MotionRefiner.pretrained``, as :class:`~refiner.refinement.refined_generator.RefinedGenerator`
+refines), and scored: the HumanAct12 recogniser's accuracy (mean over
 20 random GRU hidden states, the Action2Motion protocol), bone-length variation, frames changed,
 and what each clip's report says changed and why.
 
 The record (``samples.json``): :func:`sample_records` of the HumanAct12 samples plus ``snapped`` (the refined
-figures and ``frames_changed`` with the concept-snap option, ``concept_snap=1``), with ``ntu13`` (the same
-for the 18-joint NTU13 samples and the NTU13 recogniser, plus ``clips``) or ``ntu13_skipped`` (why
-not). Without the samples the suite returns ``{"skipped": why}`` and writes nothing.
+figures and ``frames_changed`` of the concepts method with its concept-snap option, ``concept_snap=1``, subject-1-10
+weights), with ``ntu13`` (the same for the 18-joint NTU13 samples, refined through HumanAct12's model, and the NTU13
+recogniser, plus ``clips``) or ``ntu13_skipped`` (why not). Without the samples the suite returns ``{"skipped": why}``
+and writes nothing.
 """
 from __future__ import annotations
 
@@ -53,11 +54,11 @@ def sample_records(before, labels, recognizer, refiner, *, n_hidden: int = 20, a
 
 
 def _repaired(report) -> np.ndarray:
-    """``(T,)`` bool: the frames of a report's changes but for the steps that take every frame of a clip (rigid
-    skeleton, texture filter); frames two changes share count once."""
+    """``(T,)`` bool: the frames of a report's changes but for the concept snap, which takes every frame of a clip;
+    frames two changes share count once."""
     frames = np.zeros(report.n_frames, bool)
     for c in report.changes:
-        if c["step"] not in ("skeleton", "texture"):
+        if c["step"] != "concept_snap":
             frames[c["start"]:c["stop"]] = True
     return frames
 
@@ -69,8 +70,9 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool, *, weights: 
     ``weights``: a folder of weight sets looked in before the shipped ones; ``progress`` is accepted like every suite's
     and not called.
     """
-    from refiner.refinement.pipeline import Refiner  # imports torch: here, so that importing the suites stays cheap
-    from refiner.refinement.inputs import GENERATOR_OPTIONS
+    # these import torch: here, so that importing the suites stays cheap
+    from refiner.refinement.motion_refiner import MotionRefiner
+    from refiner.refinement.pipeline import Refiner
 
     _, recognizer = load_humanact12_and_recognizer(data, hidden="random")
     folder = (default_data_dir() if data is None else Path(data)).parent / "samples" / "action2motion"
@@ -81,10 +83,10 @@ def bench_samples(data: Path | None, out: Path | None, quick: bool, *, weights: 
     before = convert("action2motion", np.load(path), representation="xyz", recenter=True)
     if quick:
         before, labels = before[:5], labels[:5]
-    # generator output, refined as RefinedGenerator refines it: every clip through the texture filter
-    refiner = Refiner.pretrained("humanact12", split="train", weights=weights, **GENERATOR_OPTIONS)
+    # generator output, refined as RefinedGenerator refines it: the default refiner
+    refiner = MotionRefiner.pretrained("humanact12", weights=weights)
     rec = sample_records(before, labels, recognizer, refiner, n_hidden=5 if quick else 20)
-    snapper = Refiner.pretrained("humanact12", split="train", weights=weights, **GENERATOR_OPTIONS, concept_snap=1.0)
+    snapper = Refiner.pretrained("humanact12", split="train", weights=weights, concept_snap=1.0)
     snapped = sample_records(before, labels, recognizer, snapper, n_hidden=5 if quick else 20)
     rec["snapped"] = {**snapped["refined"], "frames_changed": snapped["frames_changed"]}
     ntu = _ntu13_records(data, folder, quick, weights)
@@ -99,8 +101,7 @@ def _ntu13_records(data, folder: Path, quick: bool, weights: Path | None = None)
     """:func:`sample_records` of the 18-joint NTU13 samples with the NTU13 recogniser, or why not."""
     # these import torch: here, so that importing the suites stays cheap
     from refiner.evaluation.evaluators import load_recognizer
-    from refiner.refinement.pipeline import Refiner
-    from refiner.refinement.inputs import GENERATOR_OPTIONS
+    from refiner.refinement.motion_refiner import MotionRefiner
 
     path, labels_path = folder / "ntu13_xyz_vae_samples.npy", folder / "ntu13_xyz_vae_labels.npy"
     if not (path.is_file() and labels_path.is_file()):
@@ -114,7 +115,7 @@ def _ntu13_records(data, folder: Path, quick: bool, weights: Path | None = None)
     before = convert("action2motion", np.load(path), representation="xyz", recenter=True, skeleton="uestc")
     if quick:
         before, labels = before[:5], labels[:5]
-    rec = sample_records(before, labels, recognizer, Refiner.pretrained("uestc", split="train", weights=weights, **GENERATOR_OPTIONS),
+    rec = sample_records(before, labels, recognizer, MotionRefiner.pretrained("uestc", weights=weights),
                          n_hidden=5 if quick else 20, actions=[None] * len(before))
     rec["clips"] = len(before)
     return rec

@@ -1,21 +1,23 @@
-"""``motion-refiner bench skeletons``: the refiner on every skeleton it serves, one row each.
+"""``motion-refiner bench skeletons``: the default refiner on every skeleton it serves, one row each.
 
-HumanAct12 has weights of its own; ``uestc``, ``cmu_mocap`` and ``humanml3d`` are refined through
-them (:class:`~refiner.refinement.converted_refinement.ConvertedRefiner`). Every held-out clip (subjects
+The refiner is ``MotionRefiner.pretrained(skeleton)``. HumanAct12 has a motion model of its own; ``uestc`` and
+``humanml3d`` are refined through it (converted in, only the change converted back); ``cmu_mocap`` gets a row once its
+own model ships (``refiner/weights/cmu_mocap-motion/``), until then it is ``skipped``. Every held-out clip (subjects
 11-12; every ``stride``-th) is converted to each layout by :func:`refiner.core.skeletons.convert`, clean
 and with each seeded flaw family of :mod:`refiner.evaluation.flaws` (severity 2, made on the 24 joints, then
 converted, seed = clip index), refined with the action unknown (the other layouts' datasets have
 other labels), and scored against the converted clean clip: MPJPE change of clean clips and share
 of clips touched; share of each flaw's added MPJPE removed.
 
-A skeleton that ships weights of its own trained on another dataset (``cmu_mocap``: the CMU subset)
+A skeleton with a motion model of its own trained on another dataset (``cmu_mocap``: the CMU subset)
 also gets a *native* row: its dataset's held-out subjects (:data:`refiner.io.datasets.CMU_TEST_SUBJECTS`;
 every clip of at least :data:`NATIVE_FRAMES` frames, cut to its first :data:`NATIVE_FRAMES`), flaws
 seeded in its own layout, refined with the action unknown, and the dataset's Action2Motion recogniser's
 accuracy on the clean, flawed and refined clips (mean over families, 20 draws of its random hidden state).
 
 The record (``skeletons.json``): ``clips``, ``stride`` (every how many held-out clips were kept),
-``seconds``, ``skeletons`` (:func:`skeleton_records`) and ``native`` (:func:`native_records`).
+``seconds``, ``skeletons`` (:func:`skeleton_records`), ``native`` (:func:`native_records`) and ``skipped`` (skeleton ->
+why it has no row).
 """
 from __future__ import annotations
 
@@ -31,9 +33,9 @@ from refiner.evaluation.flaws import FLAW_FAMILIES, corrupt
 
 __all__ = ["bench_skeletons", "skeleton_records", "native_records", "SKELETONS", "NATIVE", "NATIVE_FRAMES"]
 
-#: The skeletons a row is made for (HumanAct12 natively, the others through whatever weights serve them).
+#: The skeletons a row is made for (HumanAct12 natively, the others through whatever model serves them).
 SKELETONS = ("humanact12", "uestc", "cmu_mocap", "humanml3d")
-#: Skeletons with weights trained on a dataset of their own layout, and that dataset.
+#: Skeletons whose motion model may be trained on a dataset of their own layout, and that dataset.
 NATIVE = {"cmu_mocap": "cmu_mocap"}
 #: Frames each native held-out clip is cut to (the CMU recogniser reads 100-frame crops).
 NATIVE_FRAMES = 120
@@ -65,42 +67,66 @@ def _row(model, clean, flawed: dict) -> tuple[dict, dict]:
     return row, refined
 
 
-def skeleton_records(clips, skeletons=SKELETONS, *, families=None, split: str = "train", weights: Path | None = None) -> dict:
-    """Per skeleton: ``clean_mpjpe_change_cm``, ``clean_clips_changed`` (share), ``removed_pct`` per
-    family and ``mean_removed_pct``, for ``clips`` (Motions on the 24 HumanAct12 joints)."""
-    from refiner.refinement.pipeline import Refiner  # imports torch: here, so that importing the suites stays cheap
+def _motion_refiner(name: str, weights: Path | None, skipped: dict | None):
+    """``MotionRefiner.pretrained(name, weights=weights)``, or None with the reason in ``skipped``."""
+    from refiner.refinement.motion_refiner import MotionRefiner  # imports torch: here, so that importing stays cheap
 
+    try:
+        return MotionRefiner.pretrained(name, weights=weights)
+    except ValueError as e:
+        if skipped is None:
+            raise
+        skipped[name] = str(e)
+        return None
+
+
+def _motion_manifest(name: str, weights: Path | None) -> dict:
+    """The manifest of ``name``'s own motion model (in ``weights``, else shipped)."""
+    import json
+
+    from refiner.refinement.motion_refiner import _WEIGHTS
+
+    folders = [Path(w) / f"{name}-motion" for w in ([weights] if weights else [])] + [_WEIGHTS / f"{name}-motion"]
+    return next(json.loads((f / "manifest.json").read_text()) for f in folders if (f / "manifest.json").is_file())
+
+
+def skeleton_records(clips, skeletons=SKELETONS, *, families=None, weights: Path | None = None,
+                     skipped: dict | None = None) -> dict:
+    """Per skeleton: ``clean_mpjpe_change_cm``, ``clean_clips_changed`` (share), ``removed_pct`` per
+    family, ``mean_removed_pct`` and ``weights`` (whose model), for ``clips`` (Motions on the 24 HumanAct12 joints).
+    A skeleton without a motion model raises ``ValueError``, or with ``skipped`` (a dict) is left out and noted there."""
     flawed = _flawed(clips, list(families or FLAW_FAMILIES))
     rec = {}
     for name in skeletons:
-        model = Refiner.pretrained(name, split=split, weights=weights)
+        model = _motion_refiner(name, weights, skipped)
+        if model is None:
+            continue
 
         def to(x):
             return np.asarray(x if name == "humanact12" else convert(x, "humanact12", name), np.float32)
 
         rec[name] = _row(model, [to(m.joints) for m in clips], {f: [to(x) for x in v] for f, v in flawed.items()})[0]
-        rec[name]["weights"] = model.manifest.get("dataset") if isinstance(model, Refiner) else "humanact12, converted"
+        own = model.model.skeleton
+        rec[name]["weights"] = own if own == name else f"{own}, converted"
     return rec
 
 
-def native_records(data: Path | None, *, families=None, stride: int = 1, split: str = "train",
-                   n_replications: int = 20, weights: Path | None = None) -> dict:
-    """Per skeleton of :data:`NATIVE` with shipped weights: the row of :func:`skeleton_records` on its
+def native_records(data: Path | None, *, families=None, stride: int = 1, n_replications: int = 20,
+                   weights: Path | None = None) -> dict:
+    """Per skeleton of :data:`NATIVE` with a motion model of its own: the row of :func:`skeleton_records` on its
     own dataset's held-out clips, plus ``accuracy_pct`` of its recogniser on ``clean``, ``flawed`` and
     ``refined`` clips (flawed / refined: mean over families) and the weights' ``licence``."""
     from refiner.evaluation.evaluators import load_recognizer  # imports torch: see skeleton_records
     from refiner.io.datasets import load_cmu_mocap
-    from refiner.refinement.pipeline import Refiner
 
-    shipped = {(w["skeleton"], w["split"]) for w in Refiner.shipped()}
     rec = {}
     for name, dataset in NATIVE.items():
-        if (name, split) not in shipped:
+        model = _motion_refiner(name, weights, {})
+        if model is None or model.model.skeleton != name:
             continue
         test = load_cmu_mocap(None if data is None else Path(data) / "cmu_mocap" / "cmu_mocap_labeled_joints.npz")
         clips = [m.with_joints(m.joints[:NATIVE_FRAMES]) for m in test.split("test") if len(m.joints) >= NATIVE_FRAMES]
         clips = clips[::stride]
-        model = Refiner.pretrained(name, split=split, weights=weights)
         flawed = _flawed(clips, list(families or FLAW_FAMILIES))
         row, refined = _row(model, [m.joints for m in clips], flawed)
         recognizer = load_recognizer(dataset, directory=None if data is None else Path(data).parent / "evaluators")
@@ -114,7 +140,7 @@ def native_records(data: Path | None, *, families=None, stride: int = 1, split: 
         row["accuracy_pct"] = {"clean": accuracy([m.joints for m in clips]),
                                "flawed": float(np.mean([accuracy(v) for v in flawed.values()])),
                                "refined": float(np.mean([accuracy(v) for v in refined.values()]))}
-        row["dataset"], row["licence"] = dataset, model.manifest.get("licence")
+        row["dataset"], row["licence"] = dataset, _motion_manifest(name, weights).get("licence")
         rec[name] = row
     return rec
 
@@ -133,9 +159,10 @@ def bench_skeletons(data: Path | None, out: Path | None, quick: bool, *, stride:
     skeletons = SKELETONS[:2] if quick else SKELETONS
     families = ("frozen_transition", "foot_sliding") if quick else None
     t0 = time.perf_counter()
-    rec = skeleton_records(clips, skeletons, families=families, weights=weights)
+    skipped: dict = {}
+    rec = skeleton_records(clips, skeletons, families=families, weights=weights, skipped=skipped)
     native = native_records(data, families=families, stride=40 if quick else 2, n_replications=2 if quick else 20,
                             weights=weights)
     seconds = time.perf_counter() - t0
     return write_record(out, "skeletons", {"clips": len(clips), "stride": stride, "seconds": seconds, "skeletons": rec,
-                                           "native": native})
+                                           "native": native, "skipped": skipped})

@@ -1,1 +1,2 @@
-"""Refinement (paper §3.2): recognition, anchor and transition refinement, the learned steps, the Refiner."""
+"""Refinement (paper §3.2): the default refiner (a learned motion model, :mod:`~refiner.refinement.motion_refiner`) and
+the concepts method (recognition, anchor and transition refinement, :class:`~refiner.refinement.pipeline.Refiner`)."""

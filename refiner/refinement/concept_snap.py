@@ -1,4 +1,5 @@
-"""Concept snap (an option, ``Refiner(concept_snap=w)``): every anchor moved onto its action's nearest anchor concept.
+"""Concept snap (an option of the concepts method, ``Refiner(concept_snap=w)``): every anchor moved onto its action's
+nearest anchor concept.
 
 The paper's anchor refinement (§3.2.2) in its plainest form: the clip is cut into transitions (Eq. 2,
 λ = 200), each anchor's root-relative pose is moved ``w`` of the way onto the nearest K-means concept of
@@ -6,9 +7,9 @@ the clip's action, and the moves are carried to the frames between anchors by a 
 so the motion between key poses keeps its own shape and the root keeps its path. The clip is then put
 back on its own bone lengths.
 
-It trades fidelity for realism, so it is off by default. On the reference generators' samples (600 per
-generator, 5 replications, as the option runs: after the flaw repairs, before the last denoising step;
-the README has the 3,000-sample figures) it lowers FID where no default step does: ``mdm`` 1.315
+It trades fidelity for realism, so it is off by default; it runs after the concept steps. Measured with the previous
+release's learned steps (on the reference generators' samples, 600 per generator, 5 replications, the option after
+the flaw repairs, before the last denoising step), it lowered FID where no default step did: ``mdm`` 1.315
 (default refinement) -> 0.853, ``a2m`` 4.113 -> 3.155, recogniser accuracy 87 -> 89 % and 43 -> 61 %;
 on real clips of subjects 1-10 it *raises* FID a little (0.546 -> 0.578: it is not a shortcut the
 recogniser rewards whatever it is given). But it moves every anchor of a real clip by its distance to
@@ -28,7 +29,7 @@ from refiner.core.rotations import rotvec_to_rotmat
 from refiner.core.skeletons import get_skeleton
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths
 
-__all__ = ["snap_to_concepts", "snapped_to_concepts", "check_strength", "check_snaps", "facing", "turned"]
+__all__ = ["snap_to_concepts", "snapped_to_concepts", "check_strength", "check_snap", "facing", "turned"]
 
 
 def check_strength(strength, name: str = "concept_snap", meaning: str = "the share of the way onto the concept") -> float:
@@ -42,15 +43,13 @@ def check_strength(strength, name: str = "concept_snap", meaning: str = "the sha
     return value
 
 
-def check_snaps(method: str, anchor_concepts, **strengths) -> tuple[float, ...]:
-    """The snap options ``strengths`` (name -> strength) checked with :func:`check_strength`, in order; a
-    ValueError naming the option if one is on without the learned ``method`` or without ``anchor_concepts``."""
-    values = tuple(check_strength(value, name) for name, value in strengths.items())
-    for name, value in zip(strengths, values):
-        if value and (method != "learned" or anchor_concepts is None):
-            raise ValueError(f"{name} needs method='learned' and `anchor_concepts`; this refiner has method="
-                             f"{method!r}, anchor_concepts {'missing' if anchor_concepts is None else 'given'}.")
-    return values
+def check_snap(strength, anchor_concepts) -> float:
+    """The ``concept_snap`` strength checked with :func:`check_strength`; a ValueError if it is on without
+    ``anchor_concepts``."""
+    value = check_strength(strength)
+    if value and anchor_concepts is None:
+        raise ValueError("concept_snap needs `anchor_concepts`, which this refiner lacks.")
+    return value
 
 
 def facing(poses: np.ndarray, skeleton: str) -> np.ndarray:
@@ -130,37 +129,22 @@ def snap_to_concepts(joints: np.ndarray, action: int, concepts: AnchorConcepts, 
 
 def snapped_to_concepts(refiner, clips: np.ndarray, reports: list, mode: str = "full") -> np.ndarray:
     """The refiner's concept-snap step: ``clips (B, T, J, 3)`` whose action was *given* snapped with
-    ``refiner.concept_snap`` (every such clip) or ``refiner.misread_snap`` (those whose report's
-    ``recognized_action`` is another action, the stronger of the two where both apply) and put back on their
-    (median) bone lengths, each change in its clip's report; returned as given when both options are 0 or
-    ``mode`` is "transition" (this is an anchor refinement). An inferred action is not snapped to: it would
-    pull the clip toward the refiner's own guess."""
-    every_clip, misread = float(getattr(refiner, "concept_snap", 0.0)), float(getattr(refiner, "misread_snap", 0.0))
-    if (every_clip == 0.0 and misread == 0.0) or mode == "transition":
+    ``refiner.concept_snap`` and put back on their (median) bone lengths, each change in its clip's report; returned as
+    given when the option is 0 or ``mode`` is "transition" (this is an anchor refinement). An inferred action is not
+    snapped to: it would pull the clip toward the refiner's own guess."""
+    strength = float(getattr(refiner, "concept_snap", 0.0))
+    if strength == 0.0 or mode == "transition":
         return clips
     out, every = clips.copy(), np.ones(clips.shape[1], bool)
     for b, report in enumerate(reports):
         if report.action is None or report.action_inferred:
             continue
-        is_misread = report.recognized_action is not None and report.recognized_action != report.action
-        strength = max(every_clip, misread if is_misread else 0.0)
-        if strength == 0.0:
-            continue
         snapped, anchors, distance = snap_to_concepts(clips[b], report.action, refiner.anchor_concepts,
                                                       skeleton=refiner.skeleton, strength=strength)
         out[b] = project_bone_lengths(snapped, reference_lengths(clips[b], refiner.skeleton), every, refiner.skeleton)
         moved = 100 * float(np.linalg.norm(out[b] - clips[b], axis=-1).mean())
-        why = (f"misread snap {strength:g}: the clip reads as another action ({_action_words(refiner, report)}), so"
-               if strength > every_clip else f"concept snap {strength:g}:")
-        report.changes.append({"start": 0, "stop": clips.shape[1], "step": "concept_snap", "repair": "concept_snap",
-                               "reason": f"{why} {len(anchors)} anchors moved onto the nearest "
+        report.changes.append({"start": 0, "stop": clips.shape[1], "step": "concept_snap",
+                               "reason": f"concept snap {strength:g}: {len(anchors)} anchors moved onto the nearest "
                                          f"anchor concepts of the action (they were {100 * distance.mean():.1f} cm "
                                          f"away on average; moved {moved:.1f} cm on average)"})
     return out
-
-
-def _action_words(refiner, report) -> str:
-    """'recognised as <name>, <given name> at <p>' for a report's misread clip."""
-    names = getattr(refiner, "action_names", ())
-    name = names[report.recognized_action] if report.recognized_action < len(names) else str(report.recognized_action)
-    return f"recognised as {name}; {report.action_name or report.action} at probability {report.action_probability:.2f}"

@@ -20,12 +20,15 @@ Defaults chosen by measurement on held-out HumanAct12 subjects (11-12) with seed
 Each step owns its threshold: the anchor scorer's ``threshold_`` (``AnchorQuality`` or, with
 ``quality="encoder"``, ``AnchorRecognizer``), the transition refiner's ``threshold_`` and the
 re-timing step's per-duration ``thresholds_``; :func:`calibrate` sets the first and the last.
-Only flagged anchors and transitions change (:mod:`refiner.refinement.splicing`).
+Only flagged anchors and transitions change (:mod:`refiner.refinement.splicing`), but for the concept-snap option
+(``concept_snap``, off by default, :mod:`refiner.refinement.concept_snap`), which runs last and moves every anchor of a
+clip whose action is given.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.report import RefinementReport, start_reports
 from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
@@ -39,7 +42,8 @@ TRANSITION_METHODS = ("network", "retime")
 
 def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: bool
                  ) -> tuple[list[np.ndarray], list[RefinementReport]]:
-    """Refine ``clips (B, T, J, 3)`` one by one with ``refiner``'s concept steps; a batch's errors name the clip."""
+    """Refine ``clips (B, T, J, 3)`` one by one with ``refiner``'s concept steps (then its concept snap, if on); a
+    batch's errors name the clip."""
     reports = start_reports(clips.shape[1], actions, mode, refiner.action_names, batched=batched)
     outs = []
     for i, (clip, report) in enumerate(zip(clips, reports)):
@@ -49,6 +53,8 @@ def refine_clips(refiner, clips: np.ndarray, actions: list, mode: str, batched: 
             if not batched:
                 raise
             raise ValueError(f"clip {i} of {len(clips)}: {e}") from e
+    if getattr(refiner, "concept_snap", 0.0) and clips.shape[1] >= MIN_FRAMES:  # the option, after the concept steps
+        outs = list(snapped_to_concepts(refiner, np.stack(outs), reports, mode))
     return outs, reports
 
 

@@ -10,37 +10,14 @@ import numpy as np
 import torch
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["MODES", "METHODS", "RIGID_LENGTHS", "RETIMING", "DENOISING", "AMPLITUDE", "POSING", "TEXTURE", "GENERATOR_OPTIONS", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices", "check_flag", "check_metres",
-           "check_metres_each", "check_threads", "thread_limits"]
+__all__ = ["MODES", "METHODS", "MIN_FRAMES", "AUTO_THREADS_BATCH", "auto_threads", "check_choice", "check_choices",
+           "check_metres", "check_metres_each", "check_threads", "thread_limits"]
 
-#: Which refinement steps run after recognition.
+#: Which steps of the concepts method run after recognition (the motion method has one mode, "full").
 MODES = ("full", "anchor", "transition")
-#: ``"learned"``: flaw recognition + repair networks; ``"concepts"``: anchor scores and transition residuals.
-METHODS = ("learned", "concepts")
-#: Lengths of the rigid skeleton: the clip's medians drawn toward learned proportions, or the medians.
-RIGID_LENGTHS = ("proportions", "median")
-#: Timing flaws: the estimator's runs re-timed first (``"estimated"``); flagged retraces cut and the stalls in runs
-#: flagged as timing re-timed (``"flagged"``, and after the estimator); the stalls only (``"stalls"``).
-RETIMING = ("estimated", "flagged", "stalls")
-#: Noise: flagged runs, noise-group runs, clips noisy throughout (``"filter"``); no noise-group runs (``"throughout"``); flagged runs only.
-DENOISING = ("runs", "filter", "throughout", "flagged")
-#: Clips that move too little for their action: scaled back (``"restore"``, for a generator's clips) or kept (``"keep"``).
-AMPLITUDE = ("restore", "keep")
-#: Poses off real motion: corrected by the pose prior (``"prior"``) or kept (``"keep"``).
-POSING = ("prior", "keep")
-#: Clips the texture filter runs on: those the noise step finds noisy throughout (``"auto"``), every clip
-#: (``"all"``: the clips are a generator's), none (``"off"``).
-TEXTURE = ("auto", "all", "off")
-#: Refiner options for a generator's clips, as :class:`~refiner.refinement.refined_generator.RefinedGenerator`,
-#: ``motion-refiner refine --adapter`` and the benchmarks of generator output refine them: every clip through the
-#: texture filter, a damped clip's motion scaled back to its action's spread, and a clip that reads as another action
-#: than the one it was generated for snapped onto its action's anchor concepts (all off for ``refine()``, which may be
-#: given mocap: the amplitude step scaled a calm held-out clip of subjects 11-12 by 3.5, 3.1 cm); and every run the
-#: timing estimator finds re-timed, without the flaw classifier's agreement (600 samples of each reference generator,
-#: against 0.8: FID actor 4.069 -> 3.844, mdm 1.151 -> 1.139, actor-large 0.979 -> 0.973, a2m 3.033 -> 3.065, a2m-large
-#: 0.901 -> 0.903); and a clip noisy throughout denoised as a whole (``denoising="filter"``; ``refine()``'s ``"runs"``
-#: leaves that step out: it cost jittered mocap its runs' repair).
-GENERATOR_OPTIONS = {"texture": "all", "amplitude": "restore", "misread_snap": 1.0, "timing_agreement": None, "denoising": "filter"}
+#: ``"motion"`` (the default): one learned model of motion, :class:`~refiner.refinement.motion_refiner.MotionRefiner`;
+#: ``"concepts"``: the paper's anchor scores and transition residuals, :class:`~refiner.refinement.pipeline.Refiner`.
+METHODS = ("motion", "concepts")
 #: Shortest clip refined; shorter ones pass through unchanged (reported).
 MIN_FRAMES = 8
 #: ``threads="auto"`` uses more than one thread from this many clips in a batch on (2-core CPU: a 60-frame clip took
@@ -53,13 +30,6 @@ def check_choice(name: str, value: str, choices) -> str:
     if value not in choices:
         raise ValueError(f"unknown {name} {value!r}; known: {', '.join(choices)}.")
     return value
-
-
-def check_flag(name: str, value) -> bool:
-    """``value`` as a bool if it is one (numpy's too), else a ``ValueError`` naming the option."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"`{name}` must be True or False; got {value!r}.")
-    return bool(value)
 
 
 def check_choices(name: str, values, choices) -> frozenset:

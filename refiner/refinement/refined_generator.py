@@ -40,9 +40,8 @@ class RefinedGenerator:
     refiner : object or callable, optional
         An object with ``refine(motion, *, action=None, return_report=False)`` returning a Motion
         (or ``(Motion, report)`` when ``return_report``), or a callable ``(Motion) -> Motion``.
-        Default: ``refiner.refinement.pipeline.Refiner.pretrained(skeleton, texture="all")`` (every clip through the
-        texture filter: they are all generated); when that cannot be imported,
-        the identity with a warning.
+        Default: ``refiner.refinement.motion_refiner.MotionRefiner.pretrained(skeleton)``, the default refiner
+        (:func:`refiner.refine`'s ``method="motion"``); when that cannot be imported, the identity with a warning.
     skeleton : str, optional
         Target skeleton, one the adapter produces. Default: the adapter's first.
     adapter_options : mapping, optional
@@ -199,27 +198,25 @@ class RefinedGenerator:
 
 
 def _default_refiner(skeleton: str):
-    """``refiner.refinement.pipeline.Refiner.pretrained(skeleton, **GENERATOR_OPTIONS)`` (every clip through the texture
-    filter, misread clips snapped to their action's concepts), or the identity with a warning if unavailable."""
+    """``refiner.refinement.motion_refiner.MotionRefiner.pretrained(skeleton)``, the default refiner, or the identity
+    with a warning if it cannot be imported."""
     try:
-        # on first use: the pipeline brings torch and the networks, which `import refiner` must not load
-        from refiner.refinement.pipeline import Refiner
+        # on first use: the refiner brings torch and the networks, which `import refiner` must not load
+        from refiner.refinement.motion_refiner import MotionRefiner
 
-        pretrained = Refiner.pretrained
+        pretrained = MotionRefiner.pretrained
     except (ImportError, AttributeError) as e:
         warnings.warn(
-            f"the default refiner (refiner.refinement.pipeline.Refiner.pretrained) is not available ({e}); "
+            f"the default refiner (refiner.refinement.motion_refiner.MotionRefiner.pretrained) is not available ({e}); "
             f"samples are returned unrefined. Pass refiner=... to choose one.",
             UserWarning,
             stacklevel=3,
         )
         return identity_refiner
     try:
-        from refiner.refinement.inputs import GENERATOR_OPTIONS
-
-        return pretrained(skeleton, **GENERATOR_OPTIONS)  # its clips are all a generator's
+        return pretrained(skeleton)
     except ValueError as e:
-        raise ValueError(f"the default refiner Refiner.pretrained({skeleton!r}) failed: {e} Pass refiner=... "
+        raise ValueError(f"the default refiner MotionRefiner.pretrained({skeleton!r}) failed: {e} Pass refiner=... "
                          f"to choose one.") from e
 
 

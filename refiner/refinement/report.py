@@ -8,7 +8,7 @@ import numpy as np
 from refiner.core.validation import check_action
 from refiner.refinement.inputs import MIN_FRAMES
 
-__all__ = ["RefinementReport", "start_reports", "REPAIR_WORDS", "repair_words"]
+__all__ = ["RefinementReport", "start_reports"]
 
 
 @dataclass
@@ -23,8 +23,6 @@ class RefinementReport:
     anchors: list[int] = field(default_factory=list)
     anchor_probability: list[float] = field(default_factory=list)
     flaw_probability: list[float] = field(default_factory=list)
-    correction_cm: list[float] = field(default_factory=list)
-    denoiser_correction_cm: list[float] = field(default_factory=list)
     anchor_scores: list[float] = field(default_factory=list)
     threshold: float | None = None
     flagged_anchors: list[int] = field(default_factory=list)
@@ -35,12 +33,6 @@ class RefinementReport:
     changes: list[dict] = field(default_factory=list)
     note: str = ""
     notes: list[str] = field(default_factory=list)
-    #: The noise step found the clip noisy throughout (a generator's texture; the pose prior's second gate).
-    noisy_throughout: bool = False
-    #: The action the recognition network reads in the clip (its argmax, the action treated as unknown), and the
-    #: probability it gives the clip's own action; filled where an action was given and ``misread_snap`` is on.
-    recognized_action: int | None = None
-    action_probability: float | None = None
 
     @property
     def changed_frames(self) -> np.ndarray:
@@ -52,7 +44,7 @@ class RefinementReport:
 
     @property
     def threshold_quantity(self) -> str | None:
-        """The field ``threshold`` applies to: ``"flaw_probability"`` (learned method) or ``"anchor_scores"``
+        """The field ``threshold`` applies to: ``"flaw_probability"`` (motion method) or ``"anchor_scores"``
         (concepts method: the anchors' pose scores, a log-likelihood, not ``anchor_probability``)."""
         if self.threshold is None:
             return None
@@ -85,33 +77,3 @@ def start_reports(n_frames: int, actions, mode: str, action_names, *, batched: b
             report.note = f"clip has {n_frames} frames; at least {MIN_FRAMES} are needed to refine, returned unchanged"
         reports.append(report)
     return reports
-
-
-#: What each repair of the learned method does, in the words of a report's ``reason``.
-REPAIR_WORDS = {
-    "network": "corrected from the given frames and context by the repair network",
-    "network_infill": "in-filled from the context by the repair network",
-    "denoise": "corrected from the given frames by the denoising network",
-    "motion_infill": "in-filled from the context by the motion in-filler",
-    "retime": "re-timed along its own path with a smooth speed",
-    "stall_retime": "re-timed along its own path with a smooth speed where it stalls",
-    "forward_retime": "replayed forward only along its progress to the next kept pose",
-    "smooth": "smoothed in time",
-    "noise_filter": "denoised by the learned noise filter at its estimated noise level",
-    "root_infill": "root path in-filled, poses kept",
-    "spline": "smoothed in time by a smoothing spline fitted to it (smoothness by cross-validation)",
-    "planted_feet": "whole body moved back by the slip of the feet planted on the ground",
-    "grounded": "whole body moved back down (or up) by the rise (or fall) its feet and root share",
-    "swapped_legs": "legs swapped back to their own sides where each showed the other's motion (mirrored)",
-    "relabelled_legs": "legs swapped back to their own sides where their joints had traded places",
-    "relabelled_arms": "arms swapped back to their own sides where their joints had traded places",
-    "unblended_legs": "legs' sides unblended where their joints had been blended with the other side's",
-    "unblended_arms": "arms' sides unblended where their joints had been blended with the other side's",
-    "unblended_pose": "a pose blended in taken out, read from how it shortened and stretched the clip's exact bones",
-}
-
-
-def repair_words(name: str) -> str:
-    """What a repair named like ``"network+planted_feet (widened by 4)"`` did, in words."""
-    base = name.split(" (")[0]
-    return ", then ".join(REPAIR_WORDS[part] for part in base.split("+")) + name[len(base):]

@@ -1,4 +1,4 @@
-"""Train the whole refiner on a dataset, module by module (appendix E.2), resumable per module."""
+"""Train the concepts method's refiner on a dataset, module by module (appendix E.2), resumable per module."""
 from __future__ import annotations
 
 import logging
@@ -25,7 +25,7 @@ __all__ = ["CONFIGS", "train_refiner", "fit_anchor_quality", "held_out_clips"]
 log = logging.getLogger(__name__)
 
 #: Network sizes and schedules. "default" is the paper's (appendix A) with early stopping;
-#: "tiny" trains in seconds on a CPU for tests; "fast" (the learned steps' short schedules) is "default" here.
+#: "tiny" trains in seconds on a CPU for tests; "fast" stops the networks early.
 CONFIGS = {
     "default": {
         "encoder": dict(d_model=128, n_layers=2, n_heads=4, ffn_dim=128),

@@ -1,0 +1,56 @@
+"""``motion-refiner train-motion``: train the default refiner's motion model and assemble its weight set.
+
+One one-thread process per model (the default, and with ``--folds`` the benchmark's two fold models), at most
+``--jobs`` at a time; each writes ``progress.log`` and resumes from its checkpoint when rerun. Then every model is
+calibrated on clean clips it never saw and ``OUT/<dataset>-motion`` is written
+(:mod:`refiner.refinement.training.build_motion_weights`).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["train_motion_arguments", "train_motion_run"]
+
+
+def train_motion_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=Path, required=True, help="root folder: runs in OUT/runs, the weight set in OUT/<dataset>-motion")
+    p.add_argument("--dataset", default="humanact12", choices=["humanact12", "cmu_mocap"])
+    p.add_argument("--data", type=Path, default=None, help="the dataset's file (default: ../shared/data/...)")
+    p.add_argument("--steps", type=int, default=6000, help="training steps per model")
+    p.add_argument("--folds", action="store_true", help="also the benchmark's fold models (`bench heldout` needs them)")
+    p.add_argument("--jobs", type=int, default=2, help="models trained at once (one thread each)")
+
+
+def train_motion_run(args: argparse.Namespace) -> int:
+    if args.jobs < 1 or args.steps < 1:
+        raise ValueError("`--jobs` and `--steps` must be at least 1.")
+    runs = args.out / "runs"
+    jobs = [("mm_all", [])] + ([("mm_0", ["--fold", "0"]), ("mm_1", ["--fold", "1"])] if args.folds else [])
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    data = ["--data", str(args.data)] if args.data else []
+    waiting, running, t0 = list(jobs), [], time.perf_counter()
+    while waiting or running:
+        while waiting and len(running) < args.jobs:
+            name, extra = waiting.pop(0)
+            cmd = [sys.executable, "-m", "refiner.refinement.training.motion_training", "--out", str(runs / name),
+                   "--dataset", args.dataset, "--steps", str(args.steps), *extra, *data]
+            print(f"start {name}: progress in {runs / name / 'progress.log'}", flush=True)
+            running.append((name, subprocess.Popen(cmd, env=env)))
+        time.sleep(5)
+        for name, proc in list(running):
+            if proc.poll() is not None:
+                running.remove((name, proc))
+                if proc.returncode != 0:
+                    for _, other in running:
+                        other.terminate()
+                    print(f"{name} failed (exit {proc.returncode}); rerun to resume", file=sys.stderr)
+                    return 1
+                print(f"{name} done at {time.perf_counter() - t0:.0f} s", flush=True)
+    from refiner.refinement.training.build_motion_weights import main as build
+
+    return build(["--runs", str(runs), "--out", str(args.out / f"{args.dataset}-motion"), "--dataset", args.dataset, *data])

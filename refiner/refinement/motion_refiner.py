@@ -1,0 +1,187 @@
+"""The default refiner: a declared list of steps around one learned model of motion.
+
+:class:`MotionRefiner` checks the input, runs its steps (today one: :class:`~refiner.refinement.steps.infill.InfillStep`,
+recognition and in-filling by the motion model) and reports each change. Frames no step changed come back exactly as
+given; changed frames keep the clip's own bone lengths. Skeletons without a model of their own (``uestc``,
+``humanml3d``) are refined through HumanAct12's: converted in, refined, and only the change converted back.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from refiner.core.manifest import file_sha256
+from refiner.core.motion import Motion
+from refiner.core.output_kind import like_input
+from refiner.core.skeleton_conversion import convert
+from refiner.core.skeletons import get_skeleton
+from refiner.core.validation import check_joints
+from refiner.refinement.inputs import MIN_FRAMES, check_metres, check_metres_each, thread_limits
+from refiner.refinement.motion_model import MotionModel
+from refiner.refinement.report import start_reports
+from refiner.refinement.steps.infill import InfillConfig, InfillStep, clip_scores
+
+__all__ = ["MotionRefiner", "calibrated_threshold", "write_motion_weights", "CLEAN_TOUCHED_SHARE"]
+
+_WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
+#: The share of clean held-out clips the detector may flag: the threshold is this quantile of their scores.
+CLEAN_TOUCHED_SHARE = 0.03
+#: Calibration pieces are this many frames (a generator's usual clip, 3 s at 20 fps).
+CALIBRATION_WINDOW = 60
+_CONVERTED = ("uestc", "humanml3d")
+#: Longest clip refined in one piece (30 minutes at 20 fps); longer input is refused rather than silently split.
+MAX_FRAMES = 36_000
+_CACHE: dict = {}
+
+
+def calibrated_threshold(model: MotionModel, clips, actions, *, share: float = CLEAN_TOUCHED_SHARE, min_run: int = 2,
+                         window: int = CALIBRATION_WINDOW) -> float:
+    """The flaw-probability threshold that flags ``share`` of ``window``-frame pieces of the clean ``clips`` (real,
+    unseen by the model): pieces, not clips, so long and short calibration clips weigh by their length."""
+    scores = []
+    for c, a in zip(clips, actions):
+        if len(c) < MIN_FRAMES:
+            continue
+        p = model.scan(np.asarray(c)[None], [a])[1]
+        starts = range(0, max(1, len(c) - window // 2), window)
+        scores += [clip_scores(p[:, s:s + window], min_run)[0] for s in starts]
+    return float(np.quantile(scores, 1.0 - share))
+
+
+def write_motion_weights(folder, models: dict, thresholds: dict, *, skeleton: str, dataset: str, licence: str,
+                         split: str = "train", notes: dict | None = None) -> None:
+    """Save motion ``models`` (name -> MotionModel; ``"all"`` is the default, ``"fold0"`` / ``"fold1"`` the benchmark's)
+    with their calibrated ``thresholds`` and a ``manifest.json``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    entries = {}
+    for name, model in models.items():
+        path = folder / f"motion_model_{name}.safetensors"
+        model.save(path, half=True)
+        entries[name] = {"file": path.name, "sha256": file_sha256(path), "threshold": float(thresholds[name]),
+                         "mechanisms": model.training_.get("mechanisms", [])}
+    manifest = {"kind": "motion_model", "skeleton": skeleton, "dataset": dataset, "split": split, "licence": licence,
+                "models": entries, **(notes or {})}
+    (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
+
+
+class MotionRefiner:
+    """Refine clips of one skeleton with a motion model.
+
+    Parameters
+    ----------
+    model : MotionModel
+    config : InfillConfig
+        Its ``threshold`` comes from the weights' manifest (:func:`calibrated_threshold`).
+    skeleton : str, optional
+        The clips' skeleton when it differs from the model's (converted through it; ``uestc``, ``humanml3d``).
+    threads : int or None, default=1
+        torch and BLAS threads while refining (None: leave them as they are).
+    """
+
+    method = "motion"
+
+    def __init__(self, model: MotionModel, config: InfillConfig, *, skeleton: str | None = None, threads: int | None = 1):
+        self.model, self.config, self.threads = model, config, threads
+        self.skeleton = get_skeleton(skeleton or model.skeleton).name
+        self.action_names = model.action_names
+        self.steps = (InfillStep(model, config),)
+
+    @classmethod
+    def pretrained(cls, skeleton: str = "humanact12", *, model: str = "all", weights=None, **options) -> "MotionRefiner":
+        """The shipped motion model of ``skeleton`` (``model``: ``"all"``, or ``"fold0"`` / ``"fold1"``, the benchmark's,
+        each trained without one fold of flaw mechanisms); ``weights``: a folder holding ``<skeleton>-motion/``, looked
+        in first. ``options`` replace fields of :class:`InfillConfig`."""
+        name = get_skeleton(skeleton).name
+        base = "humanact12" if name in _CONVERTED else name
+        folders = [Path(w) / f"{base}-motion" for w in ([weights] if weights else [])] + [_WEIGHTS / f"{base}-motion"]
+        folder = next((f for f in folders if (f / "manifest.json").is_file()), None)
+        if folder is None:
+            raise ValueError(f"no motion model for skeleton {skeleton!r} (looked in {', '.join(map(str, folders))}).")
+        manifest = json.loads((folder / "manifest.json").read_text())
+        if model not in manifest["models"]:
+            raise ValueError(f"unknown motion model {model!r}; {folder} holds {', '.join(manifest['models'])}.")
+        entry = manifest["models"][model]
+        key = (str(folder.resolve()), model)
+        if key not in _CACHE:
+            path = folder / entry["file"]
+            if file_sha256(path) != entry["sha256"]:
+                raise ValueError(f"{path} does not match the sha256 in its manifest; reinstall or retrain it.")
+            _CACHE[key] = MotionModel.load(path)
+        config = InfillConfig(**{"threshold": entry["threshold"], **options})
+        return cls(_CACHE[key], config, skeleton=name)
+
+    def refine(self, seq, *, action=None, mode: str | None = None, return_report: bool = False):
+        """Refine a Motion, ``(T, J, 3)`` or ``(B, T, J, 3)`` array or tensor; returns the same kind (see
+        :func:`refiner.refine`). ``mode`` is accepted for the concepts method's callers and must be ``"full"``."""
+        if mode not in (None, "full"):
+            raise ValueError(f"mode={mode!r} belongs to method='concepts'; the motion refiner has one mode, 'full'.")
+        with thread_limits(self.threads):
+            return self._refine(seq, action, return_report)
+
+    def _refine(self, seq, action, return_report):
+        skel = get_skeleton(self.skeleton)
+        if isinstance(seq, Motion):
+            if seq.skeleton != self.skeleton:
+                raise ValueError(f"this refiner is for skeleton {self.skeleton!r}; got a {seq.skeleton!r} motion.")
+            check_joints(seq.joints, skeleton=skel, max_frames=MAX_FRAMES)
+            check_metres(seq.joints, skel)
+            out, reports = self._refine_batch(seq.joints[None], [seq.action if action is None else action], False)
+            result = seq.with_joints(out[0].astype(np.float32))
+            return (result, reports[0]) if return_report else result
+        batched = len(getattr(seq, "shape", np.shape(seq))) == 4
+        x = check_joints(seq, skeleton=skel, batched=batched, max_frames=MAX_FRAMES)
+        clips = x if batched else x[None]
+        check_metres_each(clips, skel, batched)
+        actions = list(action) if (batched and isinstance(action, (list, tuple, np.ndarray))) else [action] * len(clips)
+        if len(actions) != len(clips):
+            raise ValueError(f"`action` must have one entry per clip ({len(clips)}); got {len(actions)}.")
+        out, reports = self._refine_batch(clips, actions, batched)
+        out = like_input((out if batched else out[0]).astype(np.float32), seq, x)
+        return (out, reports if batched else reports[0]) if return_report else out
+
+    def _refine_batch(self, clips, actions, batched):
+        reports = start_reports(clips.shape[1], actions, "full", self.action_names, batched=batched)
+        known = [r.action for r in reports]
+        out = np.array(clips, dtype=np.float32)
+        if clips.shape[1] < MIN_FRAMES:
+            return out, reports
+        inner = clips if self.skeleton == self.model.skeleton else convert(clips, self.skeleton, self.model.skeleton)
+        refined = np.array(inner, dtype=np.float64)
+        for step in self.steps:
+            prob, flagged = step.detect(refined, known)
+            changes = [[] for _ in reports]
+            todo = np.flatnonzero(flagged.any((1, 2)))  # most clips have nothing to repair: skip their passes
+            if len(todo):
+                acts = [known[i] for i in todo]
+                proposed = step.propose(refined[todo], acts, flagged[todo])
+                refined[todo], kept = step.verify(refined[todo], proposed, acts, flagged[todo], prob[todo])
+                for i, entries in zip(todo, kept):
+                    changes[i] = entries
+            for r, p, entries in zip(reports, prob, changes):
+                r.flaw_probability = p.max(1).round(4).tolist()
+                r.threshold = self.config.threshold
+                r.changes += [_change(e, self.model) for e in entries if e["kept"]]
+                r.notes += [f"{e['step']}: frames {e['start']}-{e['stop']} not changed ({', '.join(e['worse']) or 'not more real'})"
+                            for e in entries if not e["kept"]]
+        for i, r in enumerate(reports):
+            frames = r.changed_frames
+            if not frames.any():
+                continue
+            if self.skeleton == self.model.skeleton:
+                out[i, frames] = refined[i, frames]
+            else:  # only the change goes back, so joints the conversion estimates stay as given
+                delta = convert(refined[i, frames], self.model.skeleton, self.skeleton) - convert(inner[i, frames], self.model.skeleton, self.skeleton)
+                out[i, frames] = clips[i, frames] + delta
+        return out, reports
+
+
+def _change(entry: dict, model: MotionModel) -> dict:
+    """A kept in-fill as a report change: frames, parts in words, and why."""
+    skel = get_skeleton(model.skeleton)
+    names = [skel.joint_names[skel.bones[p, 1]] if p < len(skel.bones) else "root" for p in entry["parts"]]
+    before, after = entry["flaw_probability"]
+    return {"step": entry["step"], "start": entry["start"], "stop": entry["stop"], "parts": names,
+            "reason": f"flaw probability {before:.2f} -> {after:.2f}; in-filled from context by the motion model"}

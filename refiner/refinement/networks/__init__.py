@@ -1,0 +1,1 @@
+"""The networks of the refiner, one ``nn.Module`` per concept."""
