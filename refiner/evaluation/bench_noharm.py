@@ -187,7 +187,8 @@ def verdict(before: dict, after: dict) -> dict:
         if before.get(key) is None or after.get(key) is None:
             continue
         b, a = before[key], after[key]
-        out[key] = bool({"relative": a > b * (1 + tol), "up": a > b + tol, "level": a > b and a >= tol,
+        out[key] = bool({"relative": a > b * (1 + tol), "up": a > b + tol, "level": a > b + 1e-4 and a >= tol,  # 1e-4 points: float error of rebuilt frames
+                        
                          "down": a < b - tol}[kind])
     out["violated"] = [k for k, worse in out.items() if worse]
     return out

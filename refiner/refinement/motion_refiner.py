@@ -1,7 +1,8 @@
 """The default refiner: a declared list of steps around one learned model of motion.
 
-:class:`MotionRefiner` checks the input, runs its steps (today one: :class:`~refiner.refinement.steps.infill.InfillStep`,
-recognition and in-filling by the motion model) and reports each change. Frames no step changed come back exactly as
+:class:`MotionRefiner` checks the input, runs its declared steps (today one, :class:`~refiner.refinement.steps.infill.InfillStep`:
+recognition and in-filling by the motion model; a rigid-bones step did not earn its place, ``docs/decisions.md`` D10)
+and reports each change. Frames no step changed come back exactly as
 given; changed frames keep the clip's own bone lengths. Skeletons without a model of their own (``uestc``,
 ``humanml3d``) are refined through HumanAct12's: converted in, refined, and only the change converted back.
 """
@@ -151,18 +152,10 @@ class MotionRefiner:
         inner = clips if self.skeleton == self.model.skeleton else convert(clips, self.skeleton, self.model.skeleton)
         refined = np.array(inner, dtype=np.float64)
         for step in self.steps:
-            prob, flagged = step.detect(refined, known)
-            changes = [[] for _ in reports]
-            todo = np.flatnonzero(flagged.any((1, 2)))  # most clips have nothing to repair: skip their passes
-            if len(todo):
-                acts = [known[i] for i in todo]
-                proposed = step.propose(refined[todo], acts, flagged[todo])
-                refined[todo], kept = step.verify(refined[todo], proposed, acts, flagged[todo], prob[todo])
-                for i, entries in zip(todo, kept):
-                    changes[i] = entries
-            for r, p, entries in zip(reports, prob, changes):
-                r.flaw_probability = p.max(1).round(4).tolist()
-                r.threshold = self.config.threshold
+            refined, changes, prob = step.refine(refined, known)
+            for r, p in zip(reports, prob):
+                r.flaw_probability, r.threshold = p.max(1).round(4).tolist(), self.config.threshold
+            for r, entries in zip(reports, changes):
                 r.changes += [_change(e, self.model) for e in entries if e["kept"]]
                 r.notes += [f"{e['step']}: frames {e['start']}-{e['stop']} not changed ({', '.join(e['worse']) or 'not more real'})"
                             for e in entries if not e["kept"]]
@@ -179,7 +172,7 @@ class MotionRefiner:
 
 
 def _change(entry: dict, model: MotionModel) -> dict:
-    """A kept in-fill as a report change: frames, parts in words, and why."""
+    """A kept change as a report entry: frames, parts in words, and why."""
     skel = get_skeleton(model.skeleton)
     names = [skel.joint_names[skel.bones[p, 1]] if p < len(skel.bones) else "root" for p in entry["parts"]]
     before, after = entry["flaw_probability"]

@@ -37,9 +37,9 @@ def dilated(mask, before: int, after: int | None = None) -> np.ndarray:
 
 @dataclass(frozen=True)
 class WindowFigures:
-    """Physical figures of a window of a clip: mean joint jerk (m/frame³), foot slide on the ground (metres summed
-    over frames with the foot within ``contact_m`` of the ground), penetration and floating of the lowest foot (metres
-    summed over frames)."""
+    """Physical figures of a window of a clip: mean joint jerk (m/frame³), foot slide (frame pairs in which a foot
+    within ``contact_m`` of the ground moves faster than ``skate_m`` horizontally, as GMD's foot skating counts them),
+    penetration and floating of the lowest foot (metres summed over frames)."""
 
     jerk: float
     slide: float
@@ -47,7 +47,8 @@ class WindowFigures:
     floating: float
 
 
-def window_figures(joints, start: int, stop: int, skeleton, ground: float, contact_m: float = 0.05) -> WindowFigures:
+def window_figures(joints, start: int, stop: int, skeleton, ground: float, contact_m: float = 0.05,
+                   skate_m: float = 0.025) -> WindowFigures:
     """:class:`WindowFigures` of ``joints (T, J, 3)`` over ``[start, stop)`` widened by 3 frames (jerk needs them)."""
     x = np.asarray(joints, np.float64)
     lo, hi = max(0, start - 3), min(len(x), stop + 3)
@@ -58,9 +59,9 @@ def window_figures(joints, start: int, stop: int, skeleton, ground: float, conta
     up = get_skeleton(skeleton).up_vector
     step = np.diff(w[:, feet], axis=0)
     horizontal = np.linalg.norm(step - (step @ up)[..., None] * up, axis=-1)
-    on_ground = (h[1:] < contact_m) & (h[:-1] < contact_m)
+    on_ground = (h[1:] < contact_m) & (h[:-1] < contact_m) & (horizontal > skate_m)
     low = h.min(1)
-    return WindowFigures(jerk, float((horizontal * on_ground).sum()), float(np.clip(-low, 0, None).sum()),
+    return WindowFigures(jerk, float(on_ground.sum()), float(np.clip(-low, 0, None).sum()),
                          float(np.clip(low - contact_m, 0, None).sum()))
 
 

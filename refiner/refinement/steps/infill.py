@@ -29,7 +29,7 @@ class InfillConfig:
     min_run: int = 2
     margin: int = 2
     jerk_share: float = 0.05
-    slack_m: float = 0.01
+    slack_m: float = 0.0
     min_gain: float = 0.0
 
 
@@ -89,6 +89,20 @@ class InfillStep:
             frames = flagged[i].any(1)
             out[i, frames] = joints[frames]
         return out
+
+    def refine(self, clips, actions) -> tuple[np.ndarray, list[list[dict]], np.ndarray]:
+        """Detect, propose and verify on ``clips (N, T, J, 3)``: the kept clips, each clip's change entries, and the
+        flaw ``probability (N, T, P)``; clips with nothing flagged skip the in-fill."""
+        prob, flagged = self.detect(clips, actions)
+        out, changes = np.array(clips, dtype=np.float64), [[] for _ in clips]
+        todo = np.flatnonzero(flagged.any((1, 2)))
+        if len(todo):
+            acts = [actions[i] for i in todo]
+            proposed = self.propose(out[todo], acts, flagged[todo])
+            out[todo], kept = self.verify(out[todo], proposed, acts, flagged[todo], prob[todo])
+            for i, entries in zip(todo, kept):
+                changes[i] = entries
+        return out, changes, prob
 
     def verify(self, given, proposed, actions, flagged, probability) -> tuple[np.ndarray, list[list[dict]]]:
         """Keep each run of changed frames only where the model's flaw probability falls by ``min_gain`` and
