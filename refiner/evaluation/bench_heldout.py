@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from refiner.evaluation.bench_setup import Progress, ignore_progress, load_bench_humanact12, one_thread, write_record
+from refiner.refinement.motion_model import linear_fill
 from refiner.refinement.training.mechanisms import FAMILIES, MECHANISMS
 
-__all__ = ["bench_heldout", "removed_share_of", "linear_infill"]
+__all__ = ["bench_heldout", "removed_share_of"]
 
 
 def _error(a, b) -> np.ndarray:
@@ -31,21 +32,6 @@ def removed_share_of(clean, flawed, refined) -> float:
     added = sum(_error(f[None], c[None])[0] for c, f in zip(clean, flawed))
     left = sum(_error(r[None], c[None])[0] for c, r in zip(clean, refined))
     return float(1.0 - left / added) if added > 0 else 0.0
-
-
-def linear_infill(features, flagged) -> np.ndarray:
-    """The stand-in in-fill: each flagged part's features ``(N, T, F)`` interpolated linearly between the frames that
-    bound its run (``flagged (N, T, P)``, parts of 3 features each)."""
-    from refiner.refinement.steps.base import runs
-
-    out = np.array(features, np.float64)
-    for i in range(len(out)):
-        for p in range(flagged.shape[-1]):
-            cols = slice(3 * p, 3 * p + 3)
-            for s, e in runs(flagged[i, :, p]):
-                w = (np.arange(1, e - s + 1) / (e - s + 1))[:, None]
-                out[i, s:e, cols] = (1 - w) * out[i, s - 1, cols] + w * out[i, e, cols]
-    return out
 
 
 def _by_length(clips):
@@ -64,7 +50,7 @@ def _refine_all(refiner, clips, actions, *, linear: bool = False):
         if linear:
             step = refiner.steps[0]
             prob, flagged = step.detect(batch, acts)
-            refined = step.verify(batch, step.propose(batch, acts, flagged, infill=linear_infill), acts, flagged, prob)[0]
+            refined = step.verify(batch, step.propose(batch, acts, flagged, infill=linear_fill), acts, flagged, prob)[0]
         else:
             refined = refiner.refine(batch, action=acts)
         for k, i in enumerate(idx):

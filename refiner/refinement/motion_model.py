@@ -18,10 +18,11 @@ from safetensors.torch import load_file, save_file
 
 from refiner.core.bone_directions import from_bone_directions, to_bone_directions
 from refiner.core.contact import contact_joints, foot_joints
+from refiner.core.signal import linear_infill
 from refiner.core.skeletons import get_skeleton
 from refiner.refinement.networks.motion_net import MotionNet, MotionNetConfig
 
-__all__ = ["MotionModel", "motion_features", "ground_context", "ROOT_SCALE", "N_CONTEXT"]
+__all__ = ["MotionModel", "motion_features", "ground_context", "linear_fill", "ROOT_SCALE", "N_CONTEXT"]
 
 #: Root velocity (metres per frame) is scaled by this so its features weigh like unit directions.
 ROOT_SCALE = 10.0
@@ -68,19 +69,11 @@ def joints_from_features(features, root0, lengths, skeleton) -> np.ndarray:
 
 
 def linear_fill(features, hidden) -> np.ndarray:
-    """``features (N, T, 3P)`` with each part's ``hidden (N, T, P)`` runs interpolated linearly between the frames
-    that bound them (held at the one neighbour where a run touches an end): the start the in-fill corrects."""
+    """``features (N, T, 3P)`` with each part's ``hidden (N, T, P)`` frames interpolated linearly between the frames
+    that bound them (:func:`refiner.core.signal.linear_infill`): the start the in-fill corrects."""
     out = np.array(features, np.float32)
-    n_frames = out.shape[1]
     for i, p in zip(*np.nonzero(np.asarray(hidden).any(1))):
-        cols = slice(3 * p, 3 * p + 3)
-        m = np.concatenate([[False], hidden[i, :, p], [False]])
-        edges = np.flatnonzero(m[1:] != m[:-1])
-        for s, e in zip(edges[::2], edges[1::2]):
-            a = out[i, s - 1, cols] if s > 0 else out[i, min(e, n_frames - 1), cols]
-            b = out[i, e, cols] if e < n_frames else a
-            w = (np.arange(1, e - s + 1) / (e - s + 1))[:, None]
-            out[i, s:e, cols] = (1 - w) * a + w * b
+        out[i, :, 3 * p:3 * p + 3] = linear_infill(out[i, :, 3 * p:3 * p + 3], hidden[i, :, p])
     return out
 
 

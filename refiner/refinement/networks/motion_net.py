@@ -37,7 +37,7 @@ class MotionNetConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "MotionNetConfig":
-        return cls(**{"differences": False, "n_context": 0, **d, "dilations": tuple(d["dilations"])})
+        return cls(**{**d, "dilations": tuple(d["dilations"])})
 
 
 class _Block(nn.Module):

@@ -16,9 +16,10 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from refiner.core.bone_directions import blend_directions, from_bone_directions, subtree_bones, to_bone_directions
+from refiner.core.rotations import rotvec_to_rotmat
+from refiner.core.signal import smoothstep
 from refiner.core.skeletons import get_skeleton
 
 __all__ = ["Mechanism", "MECHANISMS", "FAMILIES", "mechanisms_of", "flaw_window", "envelope"]
@@ -41,8 +42,7 @@ def envelope(n_frames: int, start: int, stop: int, ramp: int) -> np.ndarray:
     ramp = max(1, min(ramp, (stop - start) // 2))
     up = np.clip((t - start + 1) / ramp, 0, 1)
     down = np.clip((stop - t) / ramp, 0, 1)
-    u = np.minimum(up, down)
-    return u * u * (3 - 2 * u)
+    return smoothstep(np.minimum(up, down))
 
 
 def _turnable_joints(skel) -> np.ndarray:
@@ -72,8 +72,8 @@ def angle_turn(clip, rng, severity=1.0, *, skeleton="humanact12"):
     angle = np.deg2rad(rng.uniform(20, 45)) * severity
 
     def edit(d, w, start, stop):
-        rot = Rotation.from_rotvec((axis / np.linalg.norm(axis) * angle)[None] * w[:, None])
-        return np.einsum("tij,tbj->tbi", rot.as_matrix(), d)
+        rot = rotvec_to_rotmat((axis / np.linalg.norm(axis) * angle)[None] * w[:, None])
+        return np.einsum("tij,tbj->tbi", rot, d)
     return _pose_edit(clip, rng, skeleton, edit)
 
 

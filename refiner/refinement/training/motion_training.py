@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from refiner.core.bone_directions import subtree_bones, to_bone_directions
+from refiner.core.rotations import rotvec_to_rotmat
 from refiner.core.skeletons import get_skeleton
 from refiner.refinement.motion_model import MotionModel, ground_context, motion_features
 from refiner.refinement.networks.motion_net import MotionNet
@@ -88,10 +89,7 @@ def _hidden_window(n_frames: int, skel, rng) -> np.ndarray:
 
 def _turned(clip, skel, rng) -> np.ndarray:
     """The clip turned about the vertical through its first root by a random angle."""
-    up = skel.up_vector
-    a = rng.uniform(0, 2 * np.pi)
-    k = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
-    rot = np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
+    rot = rotvec_to_rotmat(skel.up_vector * rng.uniform(0, 2 * np.pi))
     origin = clip[0, skel.root]
     return (clip - origin) @ rot.T
 
