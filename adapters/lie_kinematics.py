@@ -166,12 +166,12 @@ def continuous_lie_inverse_kinematics(joints, kin: LieKinematics) -> np.ndarray:
     :func:`lie_inverse_kinematics` takes each bone's global rotation as the shortest rotation from
     its raw offset direction to the bone. Those directions point up (y up) while HumanAct12 is
     y down, so the spine and leg bones sit near a rotation by pi, where the shortest rotation's axis
-    is undefined: 3.2 % of the frame-to-frame steps of real clips jump by more than 1 rad, which a
+    is undefined: frame-to-frame steps of real clips jump by more than 1 rad, which a
     regression network cannot follow. Here the same inverse kinematics runs on the clip turned
     upright (:func:`~refiner.core.rotations.yup_to_ydown`) and the half turn is folded back into the
     first bone of every chain; then :func:`~refiner.core.rotations.unwrap_rotvecs`. Only the twist
-    about bones differs: :func:`lie_forward_kinematics` gives back the same joints (3.6e-6 m on 300
-    real HumanAct12 clips) and steps over 1 rad drop to 0.5 %.
+    about bones differs: :func:`lie_forward_kinematics` gives back the same joints and steps over 1 rad
+    become rare (docs/decisions.md D14).
     """
     joints = np.asarray(joints, dtype=np.float64)
     lie = lie_inverse_kinematics(yup_to_ydown(joints), kin)

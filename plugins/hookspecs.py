@@ -9,6 +9,7 @@ removed.
 """
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
 import pluggy
@@ -22,8 +23,10 @@ __all__ = [
     "refiner_adapter_info",
     "refiner_convert_output",
     "refiner_encode_motions",
+    "refiner_read_file",
     "refiner_recognize_generator",
     "refiner_sample_generator",
+    "refiner_write_refined",
 ]
 
 hookspec = pluggy.HookspecMarker("motion_refiner")
@@ -168,4 +171,58 @@ def refiner_encode_motions(adapter: str, motions: list[Motion], options: Mapping
         ``refiner_convert_output`` accepts (so converting it back gives the motion again, up to
         what the representation cannot hold). Stops at the first non-None result; None means the
         plugin does not encode. Raise ``ValueError`` for motions you cannot encode.
+    """
+
+
+# --- files in the generator's own format -------------------------------------------------------
+
+
+@hookspec(firstresult=True)
+def refiner_read_file(adapter: str, path: Path) -> Any | None:
+    """Read a file the generator wrote into the raw output your ``refiner_convert_output`` accepts.
+
+    Called by ``PluginManager.read_file`` (the CLI's ``refine IN --adapter NAME``) on the plugin that
+    registered *adapter* only. Optional: without it the CLI reads ``.npy`` / ``.npz`` arrays with pickles
+    refused. Unpickle only through :func:`refiner.core.safe_pickle.load_npy` / ``load_pickle``.
+
+    Parameters
+    ----------
+    adapter : str
+        Adapter name requested: always the name your ``refiner_adapter_info`` declares.
+    path : Path
+        The file the user gave.
+
+    Returns
+    -------
+    object or None
+        The raw output. Stops at the first non-None result. Raise ``ValueError`` naming what is wrong with
+        a file that is not in your format.
+    """
+
+
+@hookspec(firstresult=True)
+def refiner_write_refined(
+    adapter: str, path: Path, output: Any, before: list[Motion], after: list[Motion]
+) -> Path | None:
+    """Write refined motions at *path* in the generator's own format, so that its users' scripts read them.
+
+    Called by ``PluginManager.write_refined`` (the CLI's ``refine IN --adapter NAME -o OUT``) on the plugin
+    that registered *adapter* only; when implemented, it replaces the CLI's joint output. Put back only the
+    change: frames where *after* equals *before* must be written exactly as *output* holds them.
+
+    Parameters
+    ----------
+    adapter : str
+        Adapter name requested: always the name your ``refiner_adapter_info`` declares.
+    path : Path
+        Where to write (its folder exists; overwriting was already allowed).
+    output : object
+        The raw output as read (``refiner_read_file``); never modify it.
+    before, after : list of Motion
+        What ``refiner_convert_output`` made of *output*, and the refined motions, in the same order.
+
+    Returns
+    -------
+    Path or None
+        The file written. Stops at the first non-None result; None means the plugin writes no files.
     """

@@ -5,9 +5,8 @@ Built-in adapters are listed by module name (:data:`BUILTIN_ADAPTERS`, like pyte
 module never imports an adapter. Every conversion hook is called on the one plugin that registered the
 requested adapter (``subset_hook_caller``), so plugins need not check the adapter name.
 
-Plugins are isolated from each other: one that fails to import, fails pluggy's validation,
-implements a misspelled hook or raises while describing itself is skipped with an
-:class:`AdapterPluginWarning` naming it, and the others keep working.
+Plugins are isolated from each other: one that fails to import, fails pluggy's validation, implements a
+misspelled hook or raises while describing itself is skipped with an :class:`AdapterPluginWarning` naming it.
 """
 from __future__ import annotations
 
@@ -16,6 +15,7 @@ import importlib.metadata
 import os
 import warnings
 from dataclasses import replace
+from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 import pluggy
@@ -27,23 +27,13 @@ from refiner.plugins.adapter_info import AdapterInfo
 from refiner.plugins.errors import AdapterPluginError, AdapterPluginWarning
 
 __all__ = [
-    "AdapterPluginError",
-    "AdapterPluginWarning",
-    "BUILTIN_ADAPTERS",
-    "BUILTIN_PACKAGE",
-    "DISABLE_AUTOLOAD_ENV",
-    "ENTRY_POINT_GROUP",
-    "PluginManager",
-    "convert",
-    "encode",
-    "get_adapter",
-    "get_plugin_manager",
-    "list_adapters",
+    "AdapterPluginError", "AdapterPluginWarning", "BUILTIN_ADAPTERS", "BUILTIN_PACKAGE", "DISABLE_AUTOLOAD_ENV",
+    "ENTRY_POINT_GROUP", "PluginManager", "convert", "encode", "get_adapter", "get_plugin_manager", "list_adapters",
 ]
 
 #: Built-in adapter plugins, in registration order: each is the module ``BUILTIN_PACKAGE + "." + name``,
 #: registered under ``name`` (= its adapter name = its entry-point name).
-BUILTIN_ADAPTERS: tuple[str, ...] = ("action2motion", "actor", "mld", "motiondiffuse", "mogents")
+BUILTIN_ADAPTERS: tuple[str, ...] = ("action2motion", "actor", "mld", "motiondiffuse", "mogents", "mdm")
 BUILTIN_PACKAGE = "refiner.adapters"
 ENTRY_POINT_GROUP = "motion_refiner.adapters"
 #: Set (to anything non-empty) to skip entry-point plugins, like ``PYTEST_DISABLE_PLUGIN_AUTOLOAD``.
@@ -217,6 +207,17 @@ class PluginManager(pluggy.PluginManager):
             raise TypeError(f"adapter {adapter!r} ({info.source}) must return one output per motion "
                             f"({len(motions)}); got {len(raw)}.")
         return raw
+
+    def read_file(self, adapter: str, path: Path) -> Any:
+        """Raw output read from the generator's own file (hook ``refiner_read_file``); None: the adapter reads none."""
+        return self._call_owner("refiner_read_file", adapter=self.get_adapter(adapter).name, path=Path(path))
+
+    def write_refined(self, adapter: str, path: Path, output: Any, before: Sequence[Motion],
+                      after: Sequence[Motion]) -> Path | None:
+        """Write ``after`` at ``path`` in the generator's own format (hook ``refiner_write_refined``); None: no
+        writer. ``before``: what the adapter converted ``output`` to; only their difference is written back."""
+        return self._call_owner("refiner_write_refined", adapter=self.get_adapter(adapter).name, path=Path(path),
+                                output=output, before=list(before), after=list(after))
 
     def _owner(self, adapter: str, *, exclude: object = None) -> str | None:
         """The name of the plugin whose ``refiner_adapter_info`` names *adapter* (other than *exclude*)."""

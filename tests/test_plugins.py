@@ -17,7 +17,7 @@ from refiner.plugins.manager import DISABLE_AUTOLOAD_ENV, AdapterPluginWarning, 
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "third_party_adapter"
 HOOKS = ("refiner_adapter_info", "refiner_convert_output", "refiner_encode_motions", "refiner_recognize_generator",
-         "refiner_sample_generator")
+         "refiner_sample_generator", "refiner_read_file", "refiner_write_refined")
 
 
 def make_distribution(root: Path, name: str, entry_points: dict[str, str], modules: dict[str, str] | None = None):
@@ -73,7 +73,7 @@ def test_hookspecs_are_documented_contracts():
 
 
 def test_get_adapter_unknown_name_lists_known(pm):
-    with pytest.raises(ValueError, match=r"unknown adapter 'nope'; known adapters: action2motion, actor, mld"):
+    with pytest.raises(ValueError, match=r"unknown adapter 'nope'; known adapters: action2motion, actor, mdm, mld"):
         pm.get_adapter("nope")
     with pytest.raises(ValueError, match="unknown adapter 'nope'"):
         get_adapter("nope", pm)
@@ -349,9 +349,31 @@ def test_builtin_adapters_do_not_filter_by_adapter_name(pm):
     """The manager calls only the plugin that registered the adapter, so built-ins take no `adapter` argument."""
     for name in BUILTIN_ADAPTERS:
         plugin = pm.get_plugin(name)
-        for hook in ("refiner_convert_output", "refiner_sample_generator", "refiner_encode_motions"):
+        for hook in ("refiner_convert_output", "refiner_sample_generator", "refiner_encode_motions",
+                     "refiner_read_file", "refiner_write_refined"):
             impl = getattr(plugin, hook, None)
             assert impl is None or "adapter" not in inspect.signature(impl).parameters, (name, hook)
+
+
+def test_file_hooks_are_optional_and_wrapped(pm, tmp_path):
+    """An adapter without its own file format reads and writes none (None); one whose reader raises is named."""
+    from refiner.plugins.manager import AdapterPluginError
+
+    assert pm.read_file("action2motion", tmp_path / "x.npy") is None
+    assert pm.write_refined("action2motion", tmp_path / "x.npy", None, [], []) is None and not any(tmp_path.iterdir())
+
+    class Picky:
+        @hookimpl
+        def refiner_adapter_info(self):
+            return AdapterInfo("picky", "joints", ("humanact12",))
+
+        @hookimpl
+        def refiner_read_file(self, path):
+            raise ValueError(f"{path.name} is not picky")
+
+    pm.register(Picky(), name="picky_plugin")
+    with pytest.raises(AdapterPluginError, match="'picky_plugin'.*refiner_read_file failed: x.npy is not picky"):
+        pm.read_file("picky", tmp_path / "x.npy")
 
 
 def test_encode_calls_the_owner_and_checks_what_it_gets(pm):

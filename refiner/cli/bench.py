@@ -3,12 +3,16 @@
 The suites (:data:`refiner.evaluation.bench.SUITES`) return records and write ``<suite>.json``; this
 module prints their progress lines and Markdown sections (:mod:`refiner.cli.bench_tables`) and, with
 ``--out``, collects the sections into ``REPORT.md``.
+
+``motion-refiner bench markdown`` runs nothing: it writes ``docs/benchmarks.md`` from the committed records
+(:mod:`refiner.cli.bench_markdown`).
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from refiner.cli.bench_markdown import write_benchmarks_markdown
 from refiner.cli.bench_tables import PROGRESS, SECTIONS
 from refiner.core.manifest import refiner_weight_sets
 from refiner.evaluation.bench_setup import write_record
@@ -18,9 +22,13 @@ __all__ = ["bench_arguments", "bench_run", "run_benchmarks"]
 
 
 def bench_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("suite", nargs="?", default="all", choices=[*SUITES, "all"])
+    p.add_argument("suite", nargs="?", default="all", choices=[*SUITES, "all", "markdown"],
+                   help="a suite, all of them, or markdown: write docs/benchmarks.md from the records (runs nothing)")
     p.add_argument("--data", type=Path, default=None, help="folder holding humanact12/ (default: ../shared/data)")
-    p.add_argument("--out", type=Path, default=None, help="folder for REPORT.md, plots and <suite>.json (the figures as records)")
+    p.add_argument("--out", type=Path, default=None, help="folder for REPORT.md, plots and <suite>.json (the figures as "
+                                                          "records); markdown: the page (default docs/benchmarks.md)")
+    p.add_argument("--records", type=Path, default=Path("docs/records"),
+                   help="markdown: the folder of heldout.json and noharm.json (default docs/records)")
     p.add_argument("--quick", action="store_true", help="tiny configuration (for tests)")
     p.add_argument("--stride", type=int, default=1, help="flaws, skeletons, heldout: keep every N-th held-out clip (skeletons default 4)")
     p.add_argument("--severity", type=int, action="append", choices=[1, 2, 3], help="flaws: only these severities")
@@ -32,6 +40,10 @@ def bench_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def bench_run(args: argparse.Namespace) -> int:
+    if args.suite == "markdown":
+        out = write_benchmarks_markdown(args.records, args.out or Path("docs/benchmarks.md"))
+        print(f"{out} written from the records in {args.records}")
+        return 0
     return run_benchmarks(args.suite, data=args.data, out=args.out, quick=args.quick, stride=args.stride,
                           severities=tuple(args.severity) if args.severity else None, weights=args.weights)
 

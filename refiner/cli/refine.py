@@ -1,8 +1,8 @@
 """``motion-refiner refine``: refine motion files (.npy/.npz joints or raw generator output through an adapter).
 
-Each input file gives one output (``.npy``, or ``.npz`` for clips of different lengths) and, on request,
-its report, before/after GIFs and BVH files. A file that cannot be read or refined is reported and
-skipped; the others are still written.
+Each input file gives one output (``.npy``, or ``.npz`` for clips of different lengths; the generator's own
+format when its adapter writes one, e.g. MDM's ``results.npy``) and, on request, its report, before/after
+GIFs and BVH files. A file that cannot be read or refined is reported and skipped; the others are still written.
 """
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
                    help=".npy/.npz of joints (T, J, 3) or (N, T, J, 3), raw generator output with --adapter, "
                         "or a folder of such files")
     p.add_argument("-o", "--out", type=Path, required=True,
-                   help="output .npy for a single input, else a folder (<name>.npy per input)")
+                   help="output .npy for a single input, else a folder (<name>.npy per input); in the generator's "
+                        "own format when its adapter writes one (mdm: results.npy)")
     p.add_argument("--adapter", default=None, help="convert raw generator output with this adapter "
                                                    "(`motion-refiner adapters` lists them)")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
@@ -147,7 +148,8 @@ def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12"
         ``.npy`` holding joints ``(T, J, 3)`` / ``(N, T, J, 3)`` (metres, the skeleton's frame) or a
         generator's raw output; ``.npz`` holding one array, or named arrays (``joints``/``motion``/
         ``output`` are looked for; an adapter gets them all as a dict when there are several), plus
-        optional per-clip labels under ``action``/``actions``/``labels``.
+        optional per-clip labels under ``action``/``actions``/``labels``. Pickles are refused, except by an
+        adapter that reads its generator's own file (``mdm``: ``results.npy``, restricted unpickler).
     adapter : str, optional
         Convert with this adapter (plugin) instead of reading joints.
     skeleton : str, default="humanact12"
@@ -168,10 +170,18 @@ def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12"
     ValueError
         Unreadable file, no usable array, wrong shape, or whatever the adapter rejects.
     """
-    path = Path(path)
-    raw, labels = _read_array_file(path, want_dict=adapter is not None)
+    motions, batched, _ = _load(Path(path), adapter, skeleton, options, fps, plugin_manager)
+    return motions, batched
+
+
+def _load(path: Path, adapter, skeleton, options, fps, plugin_manager) -> tuple[list, bool, object]:
+    """:func:`load_input`, plus the raw output as read (for an adapter that writes its own format back)."""
+    pm = plugin_manager if plugin_manager is not None or adapter is None else get_plugin_manager()
+    raw = pm.read_file(adapter, path) if adapter is not None else None  # the generator's own file format, if read
+    labels = None
+    if raw is None:
+        raw, labels = _read_array_file(path, want_dict=adapter is not None)
     if adapter is not None:
-        pm = plugin_manager if plugin_manager is not None else get_plugin_manager()
         motions = pm.convert(adapter, raw, skeleton=skeleton, options=options or {})
         batched = True
     else:
@@ -193,7 +203,7 @@ def load_input(path, *, adapter: str | None = None, skeleton: str = "humanact12"
         labels = np.broadcast_to(labels, (len(motions),))
         motions = [m if m.action is not None else Motion(m.joints, skeleton=m.skeleton, fps=m.fps, action=int(a))
                    for m, a in zip(motions, labels)]
-    return motions, batched
+    return motions, batched, raw
 
 
 def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, options: dict, *,
@@ -202,10 +212,10 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
     ``(paths written, frames changed, frames)``."""
     if target.resolve() == path.resolve():
         raise ValueError("the output would replace the input; choose another -o.")
-    motions, batched = load_input(path, adapter=args.adapter, skeleton=skeleton, options=options, fps=args.fps,
-                                  plugin_manager=pm)
+    motions, batched, raw = _load(path, args.adapter, skeleton, options, args.fps, pm)
     n = len(motions)
-    ragged = len({m.n_frames for m in motions}) > 1
+    own_format = pm is not None and bool(pm.owner_hook(args.adapter, "refiner_write_refined").get_hookimpls())
+    ragged = len({m.n_frames for m in motions}) > 1 and not own_format
     main_out = target.with_suffix(".npz") if ragged else target
     stem = target.with_suffix("")
     per_clip = [""] if n == 1 else [f"_{i:03d}" for i in range(n)]
@@ -231,7 +241,9 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
         reports.append(report)
 
     target.parent.mkdir(parents=True, exist_ok=True)
-    if ragged:
+    if own_format:  # e.g. MDM's results.npy: same keys and layout, only the refined frames changed
+        pm.write_refined(args.adapter, main_out, raw, motions, refined)
+    elif ragged:
         np.savez(main_out, **{f"clip_{i:03d}": m.joints for i, m in enumerate(refined)})
     else:
         stacked = np.stack([m.joints for m in refined])
@@ -246,9 +258,9 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
         from refiner.io import viz  # imports matplotlib: here, so that --help stays cheap
 
         for s, before, after, report in zip(per_clip, motions, refined, reports):
-            written += viz.animate(before, after, flagged=report.flagged_anchors, path=Path(f"{stem}{s}.gif"),
-                                   labels=("input", "refined"), mp4=False, panel_size=args.gif_size / GIF_DPI,
-                                   dpi=GIF_DPI, progress=progress)
+            written += viz.animate_change(before, after, report, path=Path(f"{stem}{s}.gif"),
+                                          labels=("input", "refined"), mp4=False, panel_size=args.gif_size / GIF_DPI,
+                                          dpi=GIF_DPI, progress=progress)
     if args.bvh:
         for s, after in zip(per_clip, refined):
             save_bvh(after, Path(f"{stem}{s}.bvh"), translations=True)

@@ -1,9 +1,10 @@
-"""Restricted unpickling of data files (SMPL model files, ACTOR's HumanAct12 pickle): arrays only, no code.
+"""Restricted unpickling of data files (SMPL models, ACTOR's and MDM's pickles): arrays only, no code.
 
 ``pickle.load`` calls whatever callable a file names, so a crafted ``.pkl`` runs code before any check of
 its content. :func:`load_pickle` resolves only a fixed list of names (numpy arrays, dtypes and scalars;
 optionally scipy sparse matrices and a stand-in for chumpy arrays) and refuses every other name before
-anything is called.
+anything is called; :func:`load_npy` reads an ``.npy`` whose object array (``np.save`` of a dict or list)
+goes through it.
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ChumpyArray", "load_pickle"]
+__all__ = ["ChumpyArray", "load_npy", "load_pickle"]
 
 # (module, name) pairs numpy's own pickles use, old and new module paths; all of them only build arrays.
 _NUMPY_NAMES = frozenset(
@@ -85,6 +86,43 @@ def load_pickle(path, *, what: str, sparse: bool = False, chumpy: bool = False):
     if chumpy and isinstance(data, dict):
         data = {k: v.to_numpy(k, str(path)) if isinstance(v, ChumpyArray) else v for k, v in data.items()}
     return data
+
+
+def load_npy(path, *, what: str):
+    """An ``.npy`` file or stream as ``np.load`` reads it, an object array through :func:`load_pickle`.
+
+    Parameters
+    ----------
+    path : path-like or seekable binary file object
+        The ``.npy`` file (or a member of an ``.npz`` opened as a stream).
+    what : str
+        What the file should be, for the error messages (e.g. ``"MDM's results.npy"``).
+
+    Returns
+    -------
+    ndarray
+        The array; an object array (``np.save`` of a dict gives a 0-d one: ``.item()`` is the dict) holds
+        only what :func:`load_pickle` allows.
+
+    Raises
+    ------
+    ValueError
+        Not an ``.npy`` file, truncated, or a pickle naming anything but arrays (nothing it names is called).
+    """
+    stream = path if hasattr(path, "read") else None
+    name = str(getattr(path, "name", "<stream>") if stream is not None else path)
+    with open(path, "rb") if stream is None else nullcontext(stream) as f:
+        try:
+            version = np.lib.format.read_magic(f)
+            header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, _, dtype = header(f)
+            if not dtype.hasobject:
+                f.seek(0)  # plain arrays: numpy's own reader, pickles refused
+                return np.lib.format.read_array(f, allow_pickle=False)
+        except Exception as e:  # noqa: BLE001 -- numpy raises several types for a bad header
+            raise ValueError(f"{name!r} is not {what}: not a readable .npy file ({type(e).__name__}: {e}).") from e
+        arr = load_pickle(f, what=what)
+    return np.asarray(arr, dtype=object).reshape(shape) if np.ndim(arr) else np.asarray(arr, dtype=object)
 
 
 class _Refused(pickle.UnpicklingError):

@@ -45,8 +45,8 @@ HUMANACT12_FINE_CODES = (
 
 
 #: The four published recognisers: config, ``.safetensors`` file and original ``.tar`` file, all in
-#: :func:`evaluators_dir`. Accuracies on real clips (60-frame crops; CMU 100 frames) are in the README
-#: of the shared data folder: humanact12 99.9 %, humanact12_fine 99 %, cmu_mocap 93.6 %.
+#: :func:`evaluators_dir`. Their accuracies on real clips (60-frame crops; CMU 100 frames) are in the
+#: README of the shared data folder.
 RECOGNIZERS: dict[str, tuple[RecognizerConfig, str, str]] = {
     "humanact12": (
         RecognizerConfig(24, 12, "humanact12", "humanact12", 60, 1.0, HUMANACT12_ACTIONS),

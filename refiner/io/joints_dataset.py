@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from refiner.core.motion import Motion
-from refiner.core.safe_pickle import load_pickle
+from refiner.core.safe_pickle import load_npy
 from refiner.core.skeletons import get_skeleton, list_skeletons
 from refiner.io.datasets import MotionDataset
 
@@ -193,11 +193,4 @@ def _read_npz(path: Path):
 def _read_member(z: zipfile.ZipFile, member: str, path: Path) -> np.ndarray:
     """One ``.npy`` member; object arrays go through the restricted unpickler."""
     with z.open(member) as f:
-        version = np.lib.format.read_magic(f)
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, _, dtype = read_header(f)
-        if dtype.hasobject:
-            arr = load_pickle(f, what=f"an object array of clips ({path.name}:{member})")
-            return np.asarray(arr, dtype=object).reshape(shape) if np.ndim(arr) else np.asarray(arr, dtype=object)
-    with z.open(member) as f:
-        return np.lib.format.read_array(f, allow_pickle=False)
+        return load_npy(f, what=f"an array or an object array of clips ({path.name}:{member})")

@@ -80,7 +80,7 @@ class TrainSchedule:
     ``max_seconds``; ``device`` ("auto": CUDA when available); ``progress`` shows a progress bar;
     ``keep_best``: with validation data, training ends on the weights of the best validation loss,
     else on the last epoch's (a generator's samples can go on improving after its validation loss
-    stops: the a2m-large's recogniser accuracy rose 75.7 -> 78.7 % in the 100 epochs after its best one).
+    stops: docs/decisions.md D13).
     """
 
     n_epochs: int = 200

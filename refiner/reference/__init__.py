@@ -11,13 +11,12 @@
 - :class:`MotionDiffusionGenerator` (``"mdm"``, :mod:`refiner.reference.diffusion`) follows MDM
   (Tevet et al. 2023): a transformer denoiser predicting the clean clip, classifier-free guidance,
   50 DDIM steps; joint positions like ``actor``. Trained about 100 minutes on CPU (676 epochs, then
-  800 more from those weights with a decaying learning rate): recogniser accuracy 85.6 % of its
-  samples, FID 1.32 (600 samples, 5 replications).
+  800 more from those weights with a decaying learning rate; docs/decisions.md D13).
 
 ``"a2m-large"`` and ``"actor-large"`` are the first two designs larger and trained far longer
 (:data:`~refiner.reference.loading.KIND_PARAMETERS`: 110 and 98 minutes on one CPU thread); the large actor
 samples its latent from a Gaussian per action fitted to the training posteriors (``prior="fitted"``) with
-latent guidance 1. Recogniser accuracy / FID on 600 samples: 81.4 % / 0.97 and 86.3 % / 1.10.
+latent guidance 1 (their figures: docs/decisions.md D13).
 
 The small two (:mod:`refiner.reference.base`) are trained on 60-frame crops (first-frame root at the origin,
 native y-down frame) of HumanAct12 subjects 1-10 for a fixed number of epochs with early stopping

@@ -10,9 +10,9 @@ noise from the seeded numpy stream). The loss is MSE on ``x_0`` plus ``velocity_
 its frame-to-frame differences (MDM's velocity term). Its output, joint positions, is converted by the
 ``action2motion`` adapter's ``representation="xyz"`` path, like the transformer CVAE's.
 
-Shipped as ``mdm``: 35 minutes on two CPU threads (epoch 676 of 3,000: recogniser accuracy of its
-samples 75.8 %, FID 2.03 on 600 samples), then 800 more epochs from those weights (``warm_start``)
-with the learning rate decaying to 0 (about an hour on one thread): accuracy 85.6 %, FID 1.32.
+Shipped as ``mdm``: 35 minutes on two CPU threads (epoch 676 of 3,000), then 800 more epochs from those
+weights (``warm_start``) with the learning rate decaying to 0 (about an hour on one thread); its figures
+before and after: docs/decisions.md D13.
 """
 from __future__ import annotations
 

@@ -40,11 +40,11 @@ def lie_targets(joints, *, plugin_manager: PluginManager | None = None) -> np.nd
     """Action2Motion Lie parameters of HumanAct12 joints that change smoothly over time (the Lie VAE's targets).
 
     Action2Motion's own inverse kinematics (``joints_to_lie`` of the ``action2motion`` adapter) jumps
-    where a bone turns through pi: 3.2 % of the frame-to-frame steps of real clips jump by more than
-    1 rad, which a regression network cannot follow. The adapter's continuous variant (its
+    where a bone turns through pi: frame-to-frame steps of real clips jump by more than 1 rad, which a
+    regression network cannot follow. The adapter's continuous variant (its
     ``refiner_encode_motions`` hook with ``representation="lie", continuous=True``, reached through
-    the plugin manager) differs only in the twist about bones: decoding gives back the same joints
-    (3.6e-6 m on 300 real clips) and steps over 1 rad drop to 0.5 %.
+    the plugin manager) differs only in the twist about bones: decoding gives back the same joints and
+    steps over 1 rad become rare (docs/decisions.md D14).
 
     Parameters
     ----------

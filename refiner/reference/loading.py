@@ -36,18 +36,12 @@ GENERATOR_KINDS: dict[str, type[ReferenceGenerator]] = {
 }
 #: Hyper-parameters of a kind beyond its class's defaults.
 KIND_PARAMETERS: dict[str, dict[str, Any]] = {
-    # 300 epochs, as the first run of the shipped one; its samples went on improving after its validation
-    # loss stopped, so it keeps the last epoch's weights. Guidance (LieVAEGenerator's) 0 / 0.25 / 0.4 /
-    # 0.5 / 0.65 / 0.8 / 1 / 2 (600 samples of the shipped weights, scored against the training
-    # subjects): accuracy 81.4 / 88.7 / 91.2 / 90.4 / 90.0 / 90.1 / 88.3 / 72.8 %, FID 0.77 / 0.56 /
-    # 0.60 / 0.66 / 0.81 / 0.98 / 1.21 / 2.60; 0.25 has the lowest FID (a second seed: 90.1 %, 0.61)
+    # 300 epochs, last epoch's weights (its samples improve after the validation loss stops), guidance with
+    # the lowest FID: docs/decisions.md D13
     "a2m-large": {"hidden": 256, "schedule": TrainSchedule(n_epochs=300, batch_size=128, learning_rate=1e-3,
                                                             patience=300, keep_best=False), "guidance": 0.25},
-    # kl_weight 1e-2 (the small actor's) left 6 of 128 latent dimensions in use, so the decoder drew the
-    # action's mean motion (a fifth of the real joint speed); at 1e-4 the latent is used, and the
-    # fitted prior keeps samples where the posteriors were (TransformerCVAEGenerator's `prior`); guidance
-    # 0 / 0.5 / 0.75 / 1 (600 samples, scored against the training subjects): accuracy 81.8 / 84.5 /
-    # 85.7 / 86.3 %, FID 0.86 / 0.85 / 0.91 / 0.99
+    # kl_weight 1e-4 so that the latent is used (1e-2 drew the action's mean motion), the fitted prior keeps
+    # samples where the posteriors were (TransformerCVAEGenerator's `prior`), guidance 1: docs/decisions.md D13
     "actor-large": {"d_model": 128, "n_layers": 4, "ffn_dim": 256, "dropout": 0.1, "kl_weight": 1e-4, "prior": "fitted",
                     "guidance": 1.0},
 }
