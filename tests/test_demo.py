@@ -9,7 +9,7 @@ import pytest
 
 from refiner.cli.main import main
 
-PER_ACTION = ("{}.gif", "{}_keyframes.png", "{}_scores.png", "{}_before.npy", "{}_after.npy", "{}_report.json")
+PER_ACTION = ("{}.gif", "{}_keyframes.png", "{}_scores.png", "{}_summary.png", "{}_before.npy", "{}_after.npy", "{}_report.json")
 
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

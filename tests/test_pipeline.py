@@ -221,7 +221,7 @@ def test_default_refiner_keeps_unflagged_frames_and_reports_each_change(humanact
         assert 100 * np.linalg.norm(out - x, axis=-1).mean() < 1.0
         out, report = forced.refine(x, action=m.action, return_report=True)
         np.testing.assert_array_equal(x, before)
-        assert report.changes and all(set(c) == {"step", "start", "stop", "parts", "reason"} for c in report.changes)
+        assert report.changes and all(set(c) == {"step", "start", "stop", "parts", "kept", "reason"} and c["kept"] for c in report.changes)
         changed = report.changed_frames
         assert not changed[0] and not changed[-1] and changed.sum() > len(x) // 2
         np.testing.assert_array_equal(out[~changed], x[~changed])

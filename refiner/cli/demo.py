@@ -2,10 +2,13 @@
 
 :func:`run_demo` wraps a shipped reference generator (:mod:`refiner.reference`) in a
 :class:`~refiner.refinement.refined_generator.RefinedGenerator`, samples one clip per HumanAct12 action, and writes
-for each action a before/after animation (GIF, plus MP4 when ffmpeg is on PATH), a key-frame
-strip with the changed frames (and any flagged anchors) marked, a plot of the per-frame flaw probability (the
-concepts method's: anchor probability) with its threshold, the motions as ``.npy`` and the refinement report as JSON. The HumanAct12
-recogniser (hidden state ``"fixed"``, so before and after see the same noise) scores each clip.
+for each action, from its refinement report: an animation and a key-frame picture of the generated clip (faint)
+under the refined one (solid), front and side, with the ground and the feet's paths, frames framed in the colour of
+the step that changed them and "flagged" only where a detector flagged (:mod:`refiner.io.change_views`); a plot
+of the per-frame flaw probability (the concepts method's: anchor probability) with its threshold and the changes;
+a summary figure (jerk, foot skating, bone-length variation, cm moved, recogniser confidence, before and after);
+the motions as ``.npy`` and the report as JSON. The HumanAct12 recogniser (hidden state ``"fixed"``, so before and
+after see the same noise) scores each clip.
 """
 from __future__ import annotations
 
@@ -26,7 +29,6 @@ from refiner.core.validation import check_action
 from refiner.io.datasets import HUMANACT12_ACTIONS
 from refiner.plugins.manager import get_plugin_manager
 from refiner.refinement.refined_generator import RefinedGenerator
-from refiner.refinement.steps.base import runs
 
 __all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table", "demo_arguments",
            "demo_run"]
@@ -60,7 +62,8 @@ def demo_run(args: argparse.Namespace) -> int:
           "anchors flagged: flagged / recognised anchors.")
     n_files = sum(len(r.files) for r in result.rows) + len(result.files)
     print(f"{n_files} files written to {result.out} in {result.seconds:.1f} s "
-          f"(per action: .gif before/after, _keyframes.png, _scores.png, _before/_after.npy, _report.json)")
+          f"(per action: .gif before/after, _keyframes.png, _scores.png, _summary.png, _before/_after.npy, "
+          "_report.json)")
     return 0
 
 
@@ -170,6 +173,7 @@ def run_demo(
         of the demo already in ``out`` without ``overwrite``.
     """
     # these import torch or matplotlib: here, so that --help stays cheap
+    from refiner.evaluation.clip_summary import summary_figure
     from refiner.evaluation.evaluators import load_recognizer
     from refiner.io import viz
     from refiner.reference import load_reference_generator
@@ -222,6 +226,11 @@ def run_demo(
     names = recognizer.config.class_names
     rows = []
     for i, (label, before, after, report, files) in enumerate(samples):
+        stem = f"{label:02d}_{HUMANACT12_ACTIONS[label]}"
+        summary_figure(before, after, report, path=out / f"{stem}_summary.png",
+                       confidence=(p_before[i, label], p_after[i, label]),
+                       title=f"{HUMANACT12_ACTIONS[label].replace('_', ' ')}: generated and refined")
+        files.insert(files.index(f"{stem}_scores.png") + 1, f"{stem}_summary.png")
         rows.append(DemoRow(
             action=label, action_name=HUMANACT12_ACTIONS[label], frames=before.n_frames,
             frames_changed=int(report.changed_frames.sum()), anchors=len(report.anchors),
@@ -258,24 +267,22 @@ def format_table(rows: Sequence[DemoRow]) -> str:
 
 def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n_frames: int | None,
                   mp4: bool | None, detect: float) -> list[str]:
-    """Every file of one action; returns their names."""
-    repaired = np.zeros(before.n_frames, bool)
-    for change in report.changes:
-        repaired[change["start"] : change["stop"]] = True
-    flagged = sorted({int(f) for f in report.flagged_anchors} | set(np.flatnonzero(repaired).tolist()))
+    """Every file of one action but its summary figure (drawn once the recogniser has scored it); returns their
+    names."""
+    marks = viz.read_marks(report, before.n_frames)
     np.save(out / f"{stem}_before.npy", before.joints)
     np.save(out / f"{stem}_after.npy", after.joints)
     (out / f"{stem}_report.json").write_text(json.dumps(report.to_dict(), indent=1) + "\n")
-    anim_before, anim_after = before, after
+    anim_before, anim_after, anim_marks = before, after, marks
     if n_frames is not None and before.n_frames > n_frames:
-        anim_before, anim_after = before.crop(0, n_frames), after.crop(0, n_frames)
-    anim_flags = [f for f in flagged if f < anim_before.n_frames]
-    animations = viz.animate(anim_before, anim_after, flagged=anim_flags, path=out / f"{stem}.gif",
-                             labels=("generated", "refined"), mp4=mp4, **gif)
+        anim_before, anim_after, anim_marks = before.crop(0, n_frames), after.crop(0, n_frames), marks.crop(n_frames)
+    animations = viz.animate_change(anim_before, anim_after, anim_marks, path=out / f"{stem}.gif",
+                                    labels=("generated", "refined"), mp4=mp4, **gif)
     action = stem.split("_", 1)[1].replace("_", " ")
-    viz.keyframe_strip([before, after], strip_frames(before.n_frames, flagged, 6 if n_frames else 8), flagged=flagged,
-                       path=out / f"{stem}_keyframes.png", labels=("generated", "refined"),
-                       title=f"{action}: key frames, generated (top) and refined (bottom)")
+    marked = marks.flagged | marks.changed(True) | marks.changed(False)
+    viz.change_figure(before, after, marks, path=out / f"{stem}_keyframes.png",
+                      frames=strip_frames(before.n_frames, np.flatnonzero(marked), 6 if n_frames else 8),
+                      labels=("generated", "refined"), title=f"{action}: key frames, generated (faint) under refined")
     # Name each plotted threshold by its quantity: the report's own `threshold` is, for the concepts
     # method, a pose-score threshold (report.threshold_quantity), not this anchor-probability one.
     if report.flaw_probability:  # the motion method: per-frame flaw probability and its threshold
@@ -285,8 +292,9 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
     probability = np.asarray(probability, dtype=np.float64)
     if probability.size != before.n_frames:  # clips too short to refine carry no per-frame scores
         probability = np.zeros(before.n_frames)
-    viz.plot_scores(probability, threshold, anchors=report.anchors, flagged=flagged, path=out / f"{stem}_scores.png",
-                    fps=before.fps, label=label, title=f"{action}: {label} per frame (generated clip)")
+    viz.plot_scores(probability, threshold, anchors=report.anchors, flagged=marks.flagged, changes=marks,
+                    path=out / f"{stem}_scores.png", fps=before.fps, label=label,
+                    title=f"{action}: {label} per frame (generated clip); crosses: flagged by the detector")
     names = [f"{stem}.gif"] + [p.name for p in animations[1:]]
     names += [f"{stem}_keyframes.png", f"{stem}_scores.png", f"{stem}_before.npy", f"{stem}_after.npy",
               f"{stem}_report.json"]
@@ -294,14 +302,11 @@ def _write_action(out: Path, stem: str, before, after, report, viz, gif: dict, n
 
 
 def strip_frames(n_frames: int, flagged, n_keyframes: int) -> np.ndarray:
-    """Frames a key-frame strip shows: ``n_keyframes`` evenly spaced ones and the middle frame of each of the
-    first ``n_keyframes`` runs of ``flagged`` frames. Not every flagged frame: a clip may be changed over long runs,
-    and a strip of 60 panels shows nothing."""
-    mask = np.zeros(n_frames, bool)
-    mask[np.asarray(flagged, int)] = True
-    middles = [(a + b - 1) // 2 for a, b in runs(mask)]
-    even = np.round(np.linspace(0, n_frames - 1, min(n_keyframes, n_frames))).astype(int)
-    return np.union1d(even, np.asarray(middles[:n_keyframes], int))
+    """Frames a key-frame picture shows: :func:`refiner.io.change_views.key_frames` (``n_keyframes`` evenly spaced
+    ones and the middle frame of each of the first ``n_keyframes`` runs of ``flagged`` frames)."""
+    from refiner.io.change_views import key_frames  # imports matplotlib: here, so that --help stays cheap
+
+    return key_frames(n_frames, flagged, n_keyframes)
 
 
 def _existing_outputs(out: Path, stems: Sequence[str]) -> list[str]:

@@ -29,7 +29,7 @@ from refiner.io.skeleton_drawing import (
     style_panel,
 )
 
-__all__ = ["animate"]
+__all__ = ["animate", "check_fps", "output_targets", "write_frames"]
 
 
 def animate(
@@ -90,16 +90,8 @@ def animate(
     n_frames = max(m.n_frames for m in rows)
     flags = set(check_frames(flagged, rows[0].n_frames, name="flagged", allow_mask=True).tolist())
     labels = check_labels(labels, len(rows))
-    fps = rows[0].fps if fps is None else fps
-    if not (isinstance(fps, (int, float, np.number)) and np.isfinite(fps) and 0 < fps <= 100):
-        raise ValueError(f"`fps` must be a number in (0, 100]; got {fps!r}.")
-    out = check_out_path(path, (".gif", ".mp4"))
-    ffmpeg = shutil.which("ffmpeg") is not None
-    targets = [out]
-    if out.suffix.lower() == ".gif" and (mp4 or (mp4 is None and ffmpeg)):
-        targets.append(out.with_suffix(".mp4"))
-    if any(t.suffix.lower() == ".mp4" for t in targets) and not ffmpeg:
-        raise ValueError("MP4 output needs `ffmpeg` on PATH; install it or write a .gif with mp4=False.")
+    fps = check_fps(rows[0].fps if fps is None else fps)
+    targets = output_targets(path, mp4)
 
     skels = [m.skeleton_info for m in rows]
     fig = new_figure(panel_size * len(rows), panel_size + 0.4, dpi=dpi)
@@ -115,20 +107,49 @@ def animate(
     counter = fig.text(0.5, 0.02, "", ha="center", va="bottom", fontsize=9)
     fig.subplots_adjust(left=0.02, right=0.98, bottom=0.1, top=0.9, wspace=0.05)
 
+    def draw(t: int) -> None:
+        is_flagged = t in flags
+        for r, (motion, artist, ax) in enumerate(zip(rows, artists, axes)):
+            artist.draw(motion.joints[min(t, motion.n_frames - 1)], highlight=is_flagged and r == 0)
+            set_frame(ax, view, is_flagged)
+        counter.set_text(f"frame {t + 1}/{n_frames}" + ("   flagged" if is_flagged else ""))
+        counter.set_color(FLAG if is_flagged else "black")
+
+    write_frames(fig, targets, draw, n_frames, fps=fps, dpi=dpi, progress=progress)
+    return targets
+
+
+def check_fps(fps) -> float:
+    """``fps`` when it is a playback rate in (0, 100] frames per second, else a ValueError."""
+    if not (isinstance(fps, (int, float, np.number)) and np.isfinite(fps) and 0 < fps <= 100):
+        raise ValueError(f"`fps` must be a number in (0, 100]; got {fps!r}.")
+    return fps
+
+
+def output_targets(path, mp4: bool | None) -> list[Path]:
+    """The files an animation writes: ``path`` (.gif or .mp4) and, for a GIF, an MP4 beside it when ``mp4`` is True
+    or None with ffmpeg on PATH; a ValueError for another suffix or an MP4 without ffmpeg."""
+    out = check_out_path(path, (".gif", ".mp4"))
+    ffmpeg = shutil.which("ffmpeg") is not None
+    targets = [out]
+    if out.suffix.lower() == ".gif" and (mp4 or (mp4 is None and ffmpeg)):
+        targets.append(out.with_suffix(".mp4"))
+    if any(t.suffix.lower() == ".mp4" for t in targets) and not ffmpeg:
+        raise ValueError("MP4 output needs `ffmpeg` on PATH; install it or write a .gif with mp4=False.")
+    return targets
+
+
+def write_frames(fig, targets: Sequence[Path], draw, n_frames: int, *, fps: float, dpi: int, progress: bool) -> None:
+    """Call ``draw(t)`` for every frame ``t`` and grab ``fig`` into each of ``targets`` (GIF by Pillow, MP4 by
+    ffmpeg); ``progress`` shows a bar on stderr."""
     writers = [PillowWriter(fps=fps) if t.suffix.lower() == ".gif" else FFMpegWriter(fps=fps) for t in targets]
     for writer, target in zip(writers, targets):
         writer.setup(fig, str(target), dpi=dpi)
     try:
-        for t in tqdm(range(n_frames), desc=f"drawing {out.name}", unit="frame", disable=not progress):
-            is_flagged = t in flags
-            for r, (motion, artist, ax) in enumerate(zip(rows, artists, axes)):
-                artist.draw(motion.joints[min(t, motion.n_frames - 1)], highlight=is_flagged and r == 0)
-                set_frame(ax, view, is_flagged)
-            counter.set_text(f"frame {t + 1}/{n_frames}" + ("   flagged" if is_flagged else ""))
-            counter.set_color(FLAG if is_flagged else "black")
+        for t in tqdm(range(n_frames), desc=f"drawing {targets[0].name}", unit="frame", disable=not progress):
+            draw(t)
             for writer in writers:
                 writer.grab_frame(facecolor="white")
     finally:
         for writer in writers:
             writer.finish()
-    return targets

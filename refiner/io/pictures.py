@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 
 from refiner.core.skeletons import Skeleton, get_skeleton
 from refiner.core.validation import to_numpy
+from refiner.io.change_marks import NOT_KEPT_HATCH, ChangeMarks
 from refiner.io.skeleton_drawing import (
     CENTRE,
     FLAG,
@@ -248,6 +249,7 @@ def plot_scores(
     fps: float | None = None,
     label: str = "anchor score",
     title: str | None = None,
+    changes: ChangeMarks | None = None,
 ) -> Figure:
     """Plot per-frame anchor scores with the flagging threshold.
 
@@ -270,6 +272,9 @@ def plot_scores(
         (``"<label> threshold = ..."``), so thresholds of different quantities are not confused.
     title : str, optional
         Axes title (e.g. the action).
+    changes : ChangeMarks, optional
+        A report's changes (:func:`~refiner.io.change_marks.read_marks`), shaded in their step's colour (hatched:
+        not kept); its ``flagged`` frames are not drawn, pass them as ``flagged``.
 
     Returns
     -------
@@ -278,7 +283,8 @@ def plot_scores(
     Raises
     ------
     ValueError
-        ``scores`` not 1-D, empty or not finite; non-finite threshold; frame indices out of range.
+        ``scores`` not 1-D, empty or not finite; non-finite threshold; frame indices out of range; ``changes`` of
+        another length.
     """
     s = to_numpy(scores, name="scores").astype(np.float64)
     if s.ndim != 1 or s.size == 0:
@@ -293,6 +299,8 @@ def plot_scores(
     flag_idx = check_frames(flagged, s.size, name="flagged", allow_mask=True)
     if fps is not None and not (isinstance(fps, (int, float, np.number)) and np.isfinite(fps) and fps > 0):
         raise ValueError(f"`fps` must be a positive number; got {fps!r}.")
+    if changes is not None and changes.n_frames != s.size:
+        raise ValueError(f"`changes` must be of the T={s.size} scored frames; got {changes.n_frames}.")
     out = None if path is None else check_out_path(path, (".png",))
     x = np.arange(s.size) / (fps or 1.0)
 
@@ -302,8 +310,13 @@ def plot_scores(
     ax.axhline(float(threshold), color=FLAG, ls="--", lw=1.2, label=f"{label} threshold = {float(threshold):.3g}")
     if anchor_idx.size:
         ax.plot(x[anchor_idx], s[anchor_idx], "o", color=LEFT, ms=5, label="anchors")
+    half = 0.5 / (fps or 1.0)
+    for c in [] if changes is None else changes.changes:
+        colour, kept = changes.colour(c.step), c.kept
+        ax.axvspan(x[c.start] - half, x[c.stop - 1] + half, facecolor=colour if kept else "none",
+                   alpha=0.2 if kept else 0.8, edgecolor=colour, hatch=None if kept else NOT_KEPT_HATCH, lw=0, zorder=0,
+                   label=f"{c.step}: {'changed' if kept else 'not kept'}")
     if flag_idx.size:
-        half = 0.5 / (fps or 1.0)
         for f in flag_idx:
             ax.axvspan(x[f] - half, x[f] + half, color=FLAG, alpha=0.15, lw=0)
         ax.plot(x[flag_idx], s[flag_idx], "x", color=FLAG, ms=8, mew=2, label="flagged")
@@ -313,7 +326,9 @@ def plot_scores(
         ax.set_title(title, fontsize=10)
     ax.set_xlim(x[0] - 0.5 / (fps or 1.0), x[-1] + 0.5 / (fps or 1.0))
     ax.grid(alpha=0.3)
-    ax.legend(loc="best", fontsize=8, framealpha=0.8)
+    handles, names = ax.get_legend_handles_labels()
+    unique = dict(zip(names, handles))  # one entry per step and kind, however many runs
+    ax.legend(unique.values(), unique.keys(), loc="best", fontsize=8, framealpha=0.8)
     fig.tight_layout()
     if out is not None:
         fig.savefig(out, dpi=100, facecolor="white")

@@ -36,8 +36,8 @@ _MARGIN = 0.08  # fraction of the body's extent left free around it
 class PoseArtist:
     """The bones of one skeleton on one axes, redrawn in place frame after frame."""
 
-    def __init__(self, ax, skel: Skeleton, view: str, *, color=None, linewidth: float = 2.5):
-        self.ax, self.skel, self.view, self.linewidth = ax, skel, view, linewidth
+    def __init__(self, ax, skel: Skeleton, view: str, *, color=None, linewidth: float = 2.5, alpha: float = 1.0):
+        self.ax, self.skel, self.view, self.linewidth, self.alpha = ax, skel, view, linewidth, alpha
         self.bones = skel.bones
         self.basis = view_basis(skel, view)
         if color is None:
@@ -54,10 +54,12 @@ class PoseArtist:
         width = self.linewidth * (1.4 if highlight else 1.0)
         if self.collection is None:
             if self.view == "3d":
-                self.collection = Line3DCollection(segments, colors=colors, linewidths=width, capstyle="round")
+                self.collection = Line3DCollection(segments, colors=colors, linewidths=width, capstyle="round",
+                                                   alpha=self.alpha)
                 self.ax.add_collection3d(self.collection)
             else:
-                self.collection = LineCollection(segments, colors=colors, linewidths=width, capstyle="round")
+                self.collection = LineCollection(segments, colors=colors, linewidths=width, capstyle="round",
+                                                 alpha=self.alpha)
                 self.ax.add_collection(self.collection)
                 self.ax.autoscale_view()
         else:
@@ -76,13 +78,18 @@ def colour_legend(fig: Figure, *, y: float) -> None:
 
 
 def view_basis(skel: Skeleton, view: str) -> np.ndarray:
-    """``(3, 2)`` or ``(3, 3)`` projection: columns are the skeleton-frame directions of the screen axes."""
+    """``(3, 2)`` or ``(3, 3)`` projection: columns are the skeleton-frame directions of the screen axes.
+
+    Besides :data:`VIEWS`, ``"top"``: the ground seen from above, screen right as in the front view, the subject
+    facing down the screen (used for foot paths, not for whole poses)."""
     up, fwd = skel.up_vector, skel.forward_vector
     right = np.cross(up, fwd)  # the subject's left when facing the viewer
     if view == "front":
         return np.stack([right, up], axis=1)
     if view == "side":
         return np.stack([fwd, up], axis=1)
+    if view == "top":
+        return np.stack([right, -fwd], axis=1)
     return np.stack([right, -fwd, up], axis=1)  # 3-D: subject faces the viewer at azimuth -90
 
 

@@ -18,10 +18,18 @@ Views (``view=``), all orthographic and computed from the skeleton's own ``up`` 
 Bones are coloured by side (left blue, right green, centre grey); bones of flagged frames are red
 and their panels get a red frame. Axis limits come from the whole motion (all rows together), with
 equal scaling, so bodies never jump or stretch between frames.
+
+A refinement is drawn from its report by :func:`change_figure` (key frames) and :func:`animate_change` (GIF):
+before faint under after, front and side, the ground and the feet's paths, frames framed in the colour of the
+step that changed them and "flagged" only where a detector flagged (:mod:`refiner.io.change_views`,
+:mod:`refiner.io.change_animation`); :func:`refiner.evaluation.clip_summary.summary_figure` draws its figures.
 """
 from __future__ import annotations
 
 from refiner.io.animations import animate
+from refiner.io.change_animation import animate_change
+from refiner.io.change_marks import read_marks
+from refiner.io.change_views import change_figure
 from refiner.io.pictures import draw_pose, keyframe_strip, plot_scores, render_pose_image
 from refiner.io.skeleton_drawing import VIEWS
 
@@ -32,4 +40,7 @@ __all__ = [
     "keyframe_strip",
     "animate",
     "plot_scores",
+    "read_marks",
+    "change_figure",
+    "animate_change",
 ]

@@ -156,8 +156,10 @@ class MotionRefiner:
             for r, p in zip(reports, prob):
                 r.flaw_probability, r.threshold = p.max(1).round(4).tolist(), self.config.threshold
             for r, entries in zip(reports, changes):
+                r.flagged_frames = sorted(set(r.flagged_frames).union(*(range(e["start"], e["stop"]) for e in entries)))
                 r.changes += [_change(e, self.model) for e in entries if e["kept"]]
-                r.notes += [f"{e['step']}: frames {e['start']}-{e['stop']} not changed ({', '.join(e['worse']) or 'not more real'})"
+                r.not_kept += [_change(e, self.model) for e in entries if not e["kept"]]
+                r.notes += [f"{e['step']}: frames {e['start']}-{e['stop']} not changed ({_why_not(e)})"
                             for e in entries if not e["kept"]]
         for i, r in enumerate(reports):
             frames = r.changed_frames
@@ -171,10 +173,15 @@ class MotionRefiner:
         return out, reports
 
 
+def _why_not(entry: dict) -> str:
+    return f"worse on {', '.join(entry['worse'])}" if entry["worse"] else "not more real"
+
+
 def _change(entry: dict, model: MotionModel) -> dict:
-    """A kept change as a report entry: frames, parts in words, and why."""
+    """A step's run as a report entry: frames, parts in words, whether it was kept, and why."""
     skel = get_skeleton(model.skeleton)
     names = [skel.joint_names[skel.bones[p, 1]] if p < len(skel.bones) else "root" for p in entry["parts"]]
     before, after = entry["flaw_probability"]
-    return {"step": entry["step"], "start": entry["start"], "stop": entry["stop"], "parts": names,
-            "reason": f"flaw probability {before:.2f} -> {after:.2f}; in-filled from context by the motion model"}
+    reason = f"flaw probability {before:.2f} -> {after:.2f}; in-filled from context by the motion model"
+    return {"step": entry["step"], "start": entry["start"], "stop": entry["stop"], "parts": names, "kept": entry["kept"],
+            "reason": reason if entry["kept"] else f"{reason}, not kept: {_why_not(entry)}"}

@@ -13,7 +13,9 @@ __all__ = ["RefinementReport", "start_reports"]
 
 @dataclass
 class RefinementReport:
-    """What ``refine`` found and changed in one clip (JSON-serialisable via :meth:`to_dict`)."""
+    """What ``refine`` found and changed in one clip (JSON-serialisable via :meth:`to_dict`): ``flagged_frames``
+    are the frames a detector flagged, ``changes`` the runs a step changed, ``not_kept`` the runs a step proposed
+    and left as given (with the figures it would have made worse)."""
 
     mode: str
     n_frames: int
@@ -30,7 +32,9 @@ class RefinementReport:
     transition_residuals_cm: list[float] = field(default_factory=list)
     transition_thresholds_cm: list[float] = field(default_factory=list)
     flagged_transitions: list[list[int]] = field(default_factory=list)
+    flagged_frames: list[int] = field(default_factory=list)
     changes: list[dict] = field(default_factory=list)
+    not_kept: list[dict] = field(default_factory=list)
     note: str = ""
     notes: list[str] = field(default_factory=list)
 
