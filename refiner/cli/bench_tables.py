@@ -346,6 +346,19 @@ def _heldout_mechanism(payload: dict) -> str:
     return f"  {payload['name']}: {payload['refined']:+.1f} % removed (linear {payload['linear']:+.1f} %)"
 
 
+def _corpus_row(r: dict) -> str:
+    return f"  {r['name']}: {r['clips_per_s']:.1f} clips/s ({r['wall_s']:.1f} s from start to exit)"
+
+
+def _corpus(rec: dict) -> str:
+    rows = [[r["name"], f"{r['wall_s']:.1f}", f"{r['clips_per_s']:.1f}",
+             f"{r['pipeline_clips_per_s']:.1f}" if "pipeline_s" in r else "-"] for r in rec["rows"]]
+    return "\n".join([f"## Corpus refinement ({rec['clips']} clips of {rec['frames'] // rec['clips']} frames in {rec['shards']} "
+                      f"shards, {rec['cpus']} CPUs)", "", "Each command in a fresh process, from start to exit; the Ray "
+                      "rows start a local Ray (the last column: from the pipeline's start, Ray running).", "",
+                      markdown_table(["command", "seconds", "clips/s", "clips/s, pipeline"], rows), *rec["notes"]])
+
+
 #: Suite name -> the Markdown section of its record.
 SECTIONS: dict[str, Callable[[dict], str]] = {
     "concepts": _concepts,
@@ -358,6 +371,7 @@ SECTIONS: dict[str, Callable[[dict], str]] = {
     "generators": _generators,
     "noharm": _noharm,
     "heldout": _heldout,
+    "corpus": _corpus,
 }
 
 #: ``(suite, progress event)`` -> the line printed for its payload; events without an entry print nothing.
@@ -371,4 +385,5 @@ PROGRESS: dict[tuple[str, str], Callable[[dict], str]] = {
     ("generators", "row"): _generators_row,
     ("noharm", "set"): _noharm_set,
     ("heldout", "mechanism"): _heldout_mechanism,
+    ("corpus", "row"): _corpus_row,
 }

@@ -16,6 +16,7 @@ from refiner.cli.concepts import concepts_arguments, concepts_run
 from refiner.cli.demo import demo_arguments, demo_run
 from refiner.cli.doctor import doctor_arguments, doctor_run
 from refiner.cli.refine import refine_arguments, refine_run
+from refiner.cli.refine_corpus import refine_corpus_arguments, refine_corpus_run
 from refiner.cli.train import train_arguments, train_run
 from refiner.cli.train_generator import train_generator_arguments, train_generator_run
 from refiner.cli.train_motion import train_motion_arguments, train_motion_run
@@ -33,6 +34,8 @@ COMMANDS: dict[str, tuple[str, Callable, Callable]] = {
     "demo": ("sample every action from a reference generator, refine, write pictures and a table",
              demo_arguments, demo_run),
     "refine": ("refine motion files (.npy/.npz joints or raw generator output)", refine_arguments, refine_run),
+    "refine-corpus": ("refine a folder or glob of shards on Ray Data (optional extra: motion-refiner[ray]); resumable",
+                      refine_corpus_arguments, refine_corpus_run),
     "train-generator": ("train a reference generator (a2m, actor, mdm, a2m-large, actor-large) on HumanAct12",
                         train_generator_arguments, train_generator_run),
     "doctor": ("show what is installed: weights, evaluators, data found, torch/CUDA, threads",

@@ -4,6 +4,10 @@ One one-thread process per model (the default, and with ``--folds`` the benchmar
 ``--jobs`` at a time; each writes ``progress.log`` and resumes from its checkpoint when rerun. Then every model is
 calibrated on clean clips it never saw and ``OUT/<dataset>-motion`` is written
 (:mod:`refiner.refinement.training.build_motion_weights`).
+
+Under ``torchrun --nproc_per_node N -m refiner train-motion ...`` the N processes train each model together, one
+model after another (data-parallel: each draws its part of every batch, :func:`~refiner.refinement.training.motion_training.train_motion_model`);
+rank 0 writes the checkpoints, logs and the weight set. Rerun the same command to resume.
 """
 from __future__ import annotations
 
@@ -23,7 +27,8 @@ def train_motion_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", type=Path, default=None, help="the dataset's file (default: ../shared/data/...)")
     p.add_argument("--steps", type=int, default=6000, help="training steps per model")
     p.add_argument("--folds", action="store_true", help="also the benchmark's fold models (`bench heldout` needs them)")
-    p.add_argument("--jobs", type=int, default=2, help="models trained at once (one thread each)")
+    p.add_argument("--jobs", type=int, default=2, help="models trained at once (one thread each; under torchrun: "
+                                                       "one model at a time, on every process)")
 
 
 def train_motion_run(args: argparse.Namespace) -> int:
@@ -31,6 +36,8 @@ def train_motion_run(args: argparse.Namespace) -> int:
         raise ValueError("`--jobs` and `--steps` must be at least 1.")
     runs = args.out / "runs"
     jobs = [("mm_all", [])] + ([("mm_0", ["--fold", "0"]), ("mm_1", ["--fold", "1"])] if args.folds else [])
+    if "WORLD_SIZE" in os.environ:  # started by torchrun
+        return _train_together(args, runs, jobs)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     data = ["--data", str(args.data)] if args.data else []
     waiting, running, t0 = list(jobs), [], time.perf_counter()
@@ -51,6 +58,31 @@ def train_motion_run(args: argparse.Namespace) -> int:
                     print(f"{name} failed (exit {proc.returncode}); rerun to resume", file=sys.stderr)
                     return 1
                 print(f"{name} done at {time.perf_counter() - t0:.0f} s", flush=True)
+    return _build(args, runs)
+
+
+def _train_together(args: argparse.Namespace, runs: Path, jobs: list) -> int:
+    """Every process of the torchrun group trains each model in turn; rank 0 then assembles the weight set."""
+    from refiner.nn.distributed import finish_distributed, init_distributed, is_main_process, world
+    from refiner.refinement.training.motion_training import main as train
+
+    init_distributed()
+    data = ["--data", str(args.data)] if args.data else []
+    t0 = time.perf_counter()
+    for name, extra in jobs:
+        if is_main_process():
+            print(f"train {name} on {world()[1]} processes: progress in {runs / name / 'progress.log'}", flush=True)
+        train(["--out", str(runs / name), "--dataset", args.dataset, "--steps", str(args.steps), *extra, *data])
+        if is_main_process():
+            print(f"{name} done at {time.perf_counter() - t0:.0f} s", flush=True)
+    main_process = is_main_process()
+    finish_distributed()
+    return _build(args, runs) if main_process else 0
+
+
+def _build(args: argparse.Namespace, runs: Path) -> int:
+    """Calibrate the trained models and write ``OUT/<dataset>-motion``."""
     from refiner.refinement.training.build_motion_weights import main as build
 
+    data = ["--data", str(args.data)] if args.data else []
     return build(["--runs", str(runs), "--out", str(args.out / f"{args.dataset}-motion"), "--dataset", args.dataset, *data])

@@ -7,13 +7,15 @@ and writes ``REPORT.md``. Each suite is a module of its own, its record describe
 :mod:`~refiner.evaluation.bench_concepts`, :mod:`~refiner.evaluation.bench_refiner` (``refiner`` and
 ``speed``), :mod:`~refiner.evaluation.bench_sanity`, :mod:`~refiner.evaluation.bench_flaws`,
 :mod:`~refiner.evaluation.bench_samples`, :mod:`~refiner.evaluation.bench_skeletons`,
-:mod:`~refiner.evaluation.bench_generators` and :mod:`~refiner.evaluation.bench_noharm`.
+:mod:`~refiner.evaluation.bench_generators`, :mod:`~refiner.evaluation.bench_noharm` and
+:mod:`~refiner.evaluation.bench_corpus`.
 """
 from __future__ import annotations
 
 from typing import Callable
 
 from refiner.evaluation.bench_concepts import bench_concepts
+from refiner.evaluation.bench_corpus import bench_corpus
 from refiner.evaluation.bench_flaws import bench_flaws
 from refiner.evaluation.bench_generators import bench_generators
 from refiner.evaluation.bench_heldout import bench_heldout
@@ -38,6 +40,7 @@ __all__ = [
     "bench_skeletons",
     "bench_generators",
     "bench_noharm",
+    "bench_corpus",
 ]
 
 #: Suite name (``motion-refiner bench NAME``) -> suite, in the order ``bench all`` runs them.
@@ -52,4 +55,5 @@ SUITES: dict[str, Callable[..., dict]] = {
     "skeletons": bench_skeletons,
     "generators": bench_generators,
     "noharm": bench_noharm,
+    "corpus": bench_corpus,
 }
