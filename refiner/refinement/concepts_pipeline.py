@@ -15,7 +15,7 @@ Defaults chosen by measurement on held-out HumanAct12 subjects (11-12) with seed
 - ``transition_method="network"``: the paper's transition refinement module, applied only to
   transitions whose refined frames differ from the input by more than on 99 % of real ones.
   ``"retime"`` re-times a transition along its own path with the speed profile of its transition
-  concept (:mod:`refiner.refinement.transition_retiming`).
+  concept (:class:`refiner.refinement.transition_refinement.TransitionRetimer`).
 
 Each step owns its threshold: the anchor scorer's ``threshold_`` (``AnchorQuality`` or, with
 ``quality="encoder"``, ``AnchorRecognizer``), the transition refiner's ``threshold_`` and the

@@ -33,8 +33,7 @@ from refiner.refinement.inputs import (METHODS, MODES, auto_threads, check_choic
 from refiner.refinement.motion_refiner import MotionRefiner
 from refiner.refinement.report import RefinementReport
 from refiner.refinement.splicing import project_bone_lengths, splice
-from refiner.refinement.transition_refinement import TransitionRefiner
-from refiner.refinement.transition_retiming import TransitionRetimer
+from refiner.refinement.transition_refinement import TransitionRefiner, TransitionRetimer
 
 __all__ = ["Refiner", "RefinementReport", "refine", "MODES", "METHODS", "splice", "project_bone_lengths"]
 
