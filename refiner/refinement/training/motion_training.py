@@ -52,7 +52,6 @@ class TrainConfig:
     lr: float = 1e-3
     clean_share: float = 0.25
     hidden_share: float = 0.5
-    hidden_frames: tuple = (3, 30)
     severity: tuple = (0.5, 1.5)
     unknown_action_share: float = 0.3
     direction_tolerance: float = 0.1
@@ -71,10 +70,10 @@ def flaw_labels(clean, flawed, skeleton, config: TrainConfig) -> np.ndarray:
     return np.concatenate([bones, root[:, None]], -1)
 
 
-def _hidden_window(n_frames: int, skel, rng, frames: tuple = (3, 30)) -> np.ndarray:
-    """``(T, P)`` bool: a random window of ``frames`` (low, high) frames of one subtree, the root, or the whole body."""
+def _hidden_window(n_frames: int, skel, rng) -> np.ndarray:
+    """``(T, P)`` bool: a random window of 3-20 frames of one subtree, the root, or the whole body."""
     hidden = np.zeros((n_frames, len(skel.bones) + 1), bool)
-    length = int(rng.integers(frames[0], min(frames[1], n_frames - 2) + 1))
+    length = int(rng.integers(3, min(20, n_frames - 2) + 1))
     start = int(rng.integers(1, n_frames - length))
     kind = rng.random()
     if kind < 0.5:
@@ -112,7 +111,7 @@ def corrupted_batch(clips, actions, mechanisms: dict, skel, config: TrainConfig,
             severity = rng.uniform(*config.severity)
             flawed = mechanisms[names[int(rng.integers(len(names)))]](clean, rng, severity, skeleton=skel.name)
         lab = flaw_labels(clean, flawed, skel, config)
-        hid = _hidden_window(len(clean), skel, rng, config.hidden_frames) if rng.random() < config.hidden_share else np.zeros_like(lab)
+        hid = _hidden_window(len(clean), skel, rng) if rng.random() < config.hidden_share else np.zeros_like(lab)
         feats.append(motion_features(flawed[None], skel)[0][0])
         context.append(ground_context(flawed[None], skel)[0])
         target.append(motion_features(clean[None], skel)[0][0])
@@ -129,11 +128,8 @@ def _loss(model: MotionModel, net, batch) -> tuple[torch.Tensor, dict]:
     target = torch.as_tensor(batch["target"])
     expand = torch.arange(h.shape[-1]).repeat_interleave(3)
     clean, logits = net(shown, h, model.action_index(batch["action"], len(shown)))
-    hid = h.float()[..., expand]
-    err = (clean - target) ** 2
-    # the in-fill gets its own mean, so the few hidden frames are not outweighed by the many shown ones
-    seen = (err * (1.0 + 4.0 * lab[..., expand]) * (1 - hid)).sum() / (1 - hid).sum().clamp(min=1)
-    recon = seen + (err * hid).sum() / hid.sum().clamp(min=1)
+    focus = 1.0 + 4.0 * (h | lab.bool()).float()[..., expand]
+    recon = (focus * (clean - target) ** 2).mean()
     flaw = torch.nn.functional.binary_cross_entropy_with_logits(logits, lab, reduction="none")
     flaw = (flaw * ~h).sum() / (~h).sum().clamp(min=1)
     return recon + flaw, {"recon": recon.item(), "flaw": flaw.item()}
