@@ -62,13 +62,13 @@ def test_quick_demo_writes_every_file(demo_run):
     assert [r["action_name"] for r in summary["rows"]] == ["walk", "boxing"]
     for row in summary["rows"]:
         assert 0.0 <= row["confidence_before"] <= 1.0 and 0.0 <= row["confidence_after"] <= 1.0
-        assert row["flagged_anchors"] <= row["anchors"]
+        assert row["frames_changed"] <= row["frames"] and row["frames_flagged"] <= row["frames"]
         report = json.loads((out / f"{row['action']:02d}_{row['action_name']}_report.json").read_text())
         changed = np.zeros(60, dtype=bool)
         for c in report["changes"]:
             changed[c["start"]:c["stop"]] = True
         assert row["frames_changed"] == int(changed.sum())
-        assert row["flagged_anchors"] == len(report["flagged_anchors"]) and row["anchors"] == len(report["anchors"])
+        assert row["frames_flagged"] == len(report["flagged_frames"])
     assert "| walk |" in printed and "| boxing |" in printed and "confidence before" in printed
     assert (out / "summary.md").read_text().count("\n|") >= 4
 
@@ -119,11 +119,11 @@ def test_strip_shows_even_frames_and_one_per_flagged_run():
 def test_summary_row_says_total_for_counts_and_mean_for_confidence():
     from refiner.cli.demo import DemoRow, format_table
 
-    rows = [DemoRow(action=a, action_name=n, frames=60, frames_changed=c, anchors=3, flagged_anchors=1,
+    rows = [DemoRow(action=a, action_name=n, frames=60, frames_changed=c, frames_flagged=1,
                     confidence_before=b, confidence_after=b, predicted_before=n, predicted_after=n, files=[])
             for a, n, c, b in ((0, "warm_up", 59, 0.2), (1, "walk", 0, 0.6))]
     last = format_table(rows).splitlines()[-1]
-    assert last.startswith("| **total; mean confidence** | 59/120 | 2/6 | 0.400 | 0.400 |")
+    assert last.startswith("| **total; mean confidence** | 59/120 | 2/120 | 0.400 | 0.400 |")
 
 
 @pytest.mark.real_data

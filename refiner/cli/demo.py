@@ -59,7 +59,7 @@ def demo_run(args: argparse.Namespace) -> int:
                       mp4=False if args.no_mp4 else None, progress=True, gif_size=args.gif_size, overwrite=args.force)
     print(format_table(result.rows))
     print("confidence: the HumanAct12 recogniser's probability of the sampled action (hidden state fixed); "
-          "anchors flagged: flagged / recognised anchors.")
+          "frames flagged: frames the refiner's detector flagged (a flagged run is changed only where verified).")
     n_files = sum(len(r.files) for r in result.rows) + len(result.files)
     print(f"{n_files} files written to {result.out} in {result.seconds:.1f} s "
           f"(per action: .gif before/after, _keyframes.png, _scores.png, _summary.png, _before/_after.npy, "
@@ -75,10 +75,8 @@ class DemoRow:
     ----------
     action, action_name : int, str
     frames : int
-    frames_changed : int
-        Frames the refiner changed.
-    anchors, flagged_anchors : int
-        Anchors found and anchors flagged as flawed.
+    frames_changed, frames_flagged : int
+        Frames the refiner changed, and frames its detector flagged.
     confidence_before, confidence_after : float
         Recogniser probability of the true action (softmax), before and after refinement.
     predicted_before, predicted_after : str
@@ -91,8 +89,7 @@ class DemoRow:
     action_name: str
     frames: int
     frames_changed: int
-    anchors: int
-    flagged_anchors: int
+    frames_flagged: int
     confidence_before: float
     confidence_after: float
     predicted_before: str
@@ -233,8 +230,7 @@ def run_demo(
         files.insert(files.index(f"{stem}_scores.png") + 1, f"{stem}_summary.png")
         rows.append(DemoRow(
             action=label, action_name=HUMANACT12_ACTIONS[label], frames=before.n_frames,
-            frames_changed=int(report.changed_frames.sum()), anchors=len(report.anchors),
-            flagged_anchors=len(report.flagged_anchors),
+            frames_changed=int(report.changed_frames.sum()), frames_flagged=len(report.flagged_frames),
             confidence_before=round(float(p_before[i, label]), 4), confidence_after=round(float(p_after[i, label]), 4),
             predicted_before=str(names[int(p_before[i].argmax())]), predicted_after=str(names[int(p_after[i].argmax())]),
             files=files,
@@ -249,18 +245,18 @@ def run_demo(
 
 def format_table(rows: Sequence[DemoRow]) -> str:
     """The demo's per-action table as Markdown."""
-    header = ["action", "frames changed", "anchors flagged", "confidence before", "confidence after",
+    header = ["action", "frames changed", "frames flagged", "confidence before", "confidence after",
               "predicted before", "predicted after"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in rows:
-        lines.append(f"| {r.action_name} | {r.frames_changed}/{r.frames} | {r.flagged_anchors}/{r.anchors} | "
+        lines.append(f"| {r.action_name} | {r.frames_changed}/{r.frames} | {r.frames_flagged}/{r.frames} | "
                      f"{r.confidence_before:.3f} | {r.confidence_after:.3f} | {r.predicted_before} | "
                      f"{r.predicted_after} |")
     if rows:
         mean_b = np.mean([r.confidence_before for r in rows])
         mean_a = np.mean([r.confidence_after for r in rows])
         lines.append(f"| **total; mean confidence** | {sum(r.frames_changed for r in rows)}/{sum(r.frames for r in rows)} | "
-                     f"{sum(r.flagged_anchors for r in rows)}/{sum(r.anchors for r in rows)} | {mean_b:.3f} | "
+                     f"{sum(r.frames_flagged for r in rows)}/{sum(r.frames for r in rows)} | {mean_b:.3f} | "
                      f"{mean_a:.3f} | | |")
     return "\n".join(lines)
 
