@@ -12,6 +12,7 @@ per-sample joint file: its ``sample##_rep##_smpl_params.npy`` (render_mesh.py) i
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -79,6 +80,8 @@ def _clips(output: Any) -> tuple[np.ndarray, np.ndarray]:
     if not np.issubdtype(motion.dtype, np.floating):
         raise ValueError(f"MDM `motion` must hold floats; got {motion.dtype}.")
     n, t = len(motion), motion.shape[3]
+    if n == 0:
+        raise ValueError("MDM `motion` holds no clips; got shape (0, J, 3, T).")
     lengths = np.full(n, t) if lengths is None else np.asarray(lengths)
     if lengths.shape != (n,) or not np.issubdtype(lengths.dtype, np.integer):
         raise ValueError(f"MDM `lengths` must be {n} integers, one per clip; got {lengths.dtype} "
@@ -184,6 +187,10 @@ def refiner_read_file(path: Path) -> dict | np.ndarray:
 
 @hookimpl
 def refiner_write_refined(path: Path, output: Any, before: list[Motion], after: list[Motion]) -> Path:
-    # np.save pickles the dict exactly as MDM's generate.py does, so MDM's own loaders read it
-    np.save(path, put_back(output, before, after), allow_pickle=True)
-    return Path(path)
+    path, refined = Path(path), put_back(output, before, after)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as f:  # a file object: np.save would append .npy to a name without it
+        # pickled exactly as MDM's generate.py does, so MDM's own loaders read it
+        np.save(f, refined, allow_pickle=True)
+    os.replace(tmp, path)  # whole or not at all: an earlier results.npy is never left half-overwritten
+    return path

@@ -156,6 +156,7 @@ def good():
      "clip 0 holds NaN or Inf in its 20 valid frames"),
     ({**good(), "lengths": np.array([20, 21])}, r"lengths` must be in 2..20"),
     ({**good(), "lengths": np.array([20])}, "must be 2 integers"),
+    ({"motion": np.zeros((0, 22, 3, 20), np.float32), "lengths": np.zeros(0, np.int64)}, "holds no clips"),
     ({"thetas": 0, "root_translation": 0, "vertices": 0, "motion": 0}, "per-sample SMPL fit"),
 ])
 def test_malformed_results_are_value_errors(bad, words):
@@ -167,6 +168,20 @@ def test_nan_in_padding_is_left_alone():
     results = good()
     results["motion"][1, ..., 15] = np.nan  # beyond lengths[1] = 10: never read, never written
     assert [m.n_frames for m in mdm.to_motions(results)] == [20, 10]
+
+
+def test_write_refined_writes_the_path_it_is_given_whole(tmp_path):
+    """The hook writes exactly ``path`` (np.save would add .npy to a bare name), by rename, and MDM's loader reads it."""
+    results = good()
+    before = mdm.to_motions(results, skeleton="humanml3d")
+    after = [before[0], Motion(before[1].joints + 0.5, skeleton="humanml3d")]
+    target = tmp_path / "refined_results"
+    assert mdm.refiner_write_refined(path=target, output=results, before=before, after=after) == target
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["refined_results"]  # no .npy twin, no temporary file
+    written = np.load(target, allow_pickle=True).item()
+    np.testing.assert_array_equal(written["motion"][0], results["motion"][0])
+    np.testing.assert_allclose(written["motion"][1, ..., :10], 0.5)
+    np.testing.assert_array_equal(written["motion"][1, ..., 10:], 0.0)  # padding as given
 
 
 class _RunsCode:

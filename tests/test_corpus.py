@@ -18,7 +18,7 @@ ray = pytest.importorskip("ray", reason="Ray is not installed: corpus refinement
 pytest.importorskip("ray.data", reason="ray is installed without its data extra (pip install -e '.[ray]')")
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")  # Ray's own, about its own settings
 
-from refiner.corpus import is_complete, refine_corpus, report_path  # noqa: E402
+from refiner.corpus import corpus_settings, is_complete, refine_corpus, report_path  # noqa: E402
 from refiner.corpus import shards as shard_files  # noqa: E402
 
 
@@ -64,7 +64,7 @@ def runs(corpus, tmp_path_factory):
         mp.setattr(shard_files, "os", SimpleNamespace(replace=killing_replace))
         with pytest.raises(_Killed):
             refine_corpus(corpus, out, workers=2, batch_size=4)
-        complete = {s.name: _stat(out, s) for s in shards if is_complete(s, out)}
+        complete = {s.name: _stat(out, s) for s in shards if is_complete(s, out, corpus_settings())}
         left_over = sorted(p.name for p in out.iterdir())
 
         written = []
@@ -95,7 +95,8 @@ def test_the_kill_left_a_half_written_run(runs):
 
 def test_rerun_finishes_every_shard_and_reports_the_corrupt_one(runs):
     valid = [s for s in runs.shards if s.name != "s5.npy"]
-    assert all(is_complete(s, runs.out) for s in valid)
+    assert all(is_complete(s, runs.out, corpus_settings()) for s in valid)
+    assert not any(is_complete(s, runs.out, corpus_settings(stack=True)) for s in valid)  # other settings: redo
     assert list(runs.summary.failed) == [str(runs.shards[-1])]
     assert "s5.npy" in runs.summary.failed[str(runs.shards[-1])]
     failure = json.loads(report_path(runs.shards[-1], runs.out).read_text())

@@ -34,6 +34,7 @@ def test_a_shard_is_complete_only_with_its_report_closed_and_its_output_intact(t
     out = tmp_path / "out"
     out.mkdir()
     clips = [np.zeros((30, 24, 3), np.float32), np.ones((30, 24, 3), np.float32)]
+    np.save(shard, np.stack(clips))
     assert not is_complete(shard, out)
     closing = write_shard(shard, out, clips, True, [_report(30, 2), _report(30)])
     assert closing["status"] == "done" and closing["frames_changed"] == 2
@@ -52,11 +53,30 @@ def test_a_shard_is_complete_only_with_its_report_closed_and_its_output_intact(t
     assert not is_complete(shard, out)
 
 
+def test_a_shard_other_than_the_one_refined_is_not_complete(tmp_path):
+    """A shard regenerated under the same name, or another folder's shard of that name, is redone, not skipped."""
+    out = tmp_path / "out"
+    out.mkdir()
+    clips = [np.zeros((30, 24, 3), np.float32)]
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    np.save(tmp_path / "a" / "s.npy", np.stack(clips))
+    np.save(tmp_path / "b" / "s.npy", np.stack(clips) + 1)
+    write_shard(tmp_path / "a" / "s.npy", out, clips, True, [_report(30)])
+    assert is_complete(tmp_path / "a" / "s.npy", out)
+    assert not is_complete(tmp_path / "b" / "s.npy", out)  # same stem, other content
+    np.save(tmp_path / "a" / "s.npy", np.stack(clips) + 2)  # the generator wrote the shard again
+    assert not is_complete(tmp_path / "a" / "s.npy", out)
+
+
 def test_clips_of_different_lengths_go_to_an_npz(tmp_path):
     clips = [np.zeros((30, 24, 3), np.float32), np.zeros((40, 24, 3), np.float32)]
-    closing = write_shard(tmp_path / "r.npy", tmp_path, clips, True, [_report(30), _report(40)])
-    assert closing["output"] == "r.npz" and is_complete(tmp_path / "r.npy", tmp_path)
-    with np.load(tmp_path / "r.npz") as f:
+    np.savez(tmp_path / "r.npz", a=clips[0], b=clips[1])
+    out = tmp_path / "out"
+    out.mkdir()
+    closing = write_shard(tmp_path / "r.npz", out, clips, True, [_report(30), _report(40)])
+    assert closing["output"] == "r.npz" and is_complete(tmp_path / "r.npz", out)
+    with np.load(out / "r.npz") as f:
         assert [f[k].shape[0] for k in sorted(f.files)] == [30, 40]
 
 

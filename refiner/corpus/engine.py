@@ -103,6 +103,15 @@ class ClipRefiner:
                 "report": np.array(reports, dtype=object), "error": np.array(errors, dtype=object)}
 
 
+def corpus_settings(*, adapter: str | None = None, options: dict | None = None, skeleton: str = "humanact12",
+                    fps: float = 20.0, weights=None, stack: bool = False) -> dict:
+    """What a shard is refined with, as its report stores it (:func:`refine_corpus`'s arguments of the same names):
+    a rerun with other settings redoes the shard."""
+    given = {"adapter": adapter, "options": options or {}, "skeleton": skeleton, "fps": fps,
+             "weights": None if weights is None else str(weights), "stack": stack}
+    return json.loads(json.dumps(given, sort_keys=True, default=str))
+
+
 def refine_corpus(source, out, *, address: str | None = None, workers: int = 1, gpus_per_worker: float = 0.0,
                   batch_size: int = 16, stack: bool = False, adapter: str | None = None, options: dict | None = None,
                   skeleton: str = "humanact12", fps: float = 20.0, weights=None) -> CorpusSummary:
@@ -147,7 +156,10 @@ def refine_corpus(source, out, *, address: str | None = None, workers: int = 1, 
         raise ValueError(f"`out` {str(out)!r} holds input shards; choose another folder.")
     ray = require_ray()
     out.mkdir(parents=True, exist_ok=True)
-    todo = [s for s in shards if not is_complete(s, out)]
+    reader = {"adapter": adapter, "options": options or {}, "skeleton": skeleton, "fps": fps}
+    worker = {"skeleton": skeleton, "weights": None if weights is None else str(weights), "stack": stack}
+    settings = corpus_settings(**reader, weights=weights, stack=stack)
+    todo = [s for s in shards if not is_complete(s, out, settings)]
     summary = CorpusSummary(shards=len(shards), skipped=len(shards) - len(todo))
     if not todo:
         return summary
@@ -156,9 +168,8 @@ def refine_corpus(source, out, *, address: str | None = None, workers: int = 1, 
         ray.init(address=address, include_dashboard=False)
     try:
         t0 = time.perf_counter()
-        _run(ray, todo, out, summary, workers=workers, gpus=gpus_per_worker, batch_size=batch_size,
-             reader={"adapter": adapter, "options": options or {}, "skeleton": skeleton, "fps": fps},
-             worker={"skeleton": skeleton, "weights": None if weights is None else str(weights), "stack": stack})
+        _run(ray, todo, out, summary, workers=workers, gpus=gpus_per_worker, batch_size=batch_size, reader=reader,
+             worker=worker, settings=settings)
         summary.seconds = time.perf_counter() - t0
     finally:
         if started:
@@ -166,7 +177,8 @@ def refine_corpus(source, out, *, address: str | None = None, workers: int = 1, 
     return summary
 
 
-def _run(ray, todo: list[Path], out: Path, summary: CorpusSummary, *, workers, gpus, batch_size, reader, worker):
+def _run(ray, todo: list[Path], out: Path, summary: CorpusSummary, *, workers, gpus, batch_size, reader, worker,
+         settings):
     """Build the pipeline and write each shard as its last clip arrives."""
     items = [{"shard": str(s)} for s in todo]
     ds = ray.data.from_items(items, override_num_blocks=len(items))
@@ -182,25 +194,27 @@ def _run(ray, todo: list[Path], out: Path, summary: CorpusSummary, *, workers, g
             if shard in closed:
                 continue
             if batch["error"][i]:
-                _close(shard, out, summary, closed, pending, error=str(batch["error"][i]))
+                _close(shard, out, summary, closed, pending, settings, error=str(batch["error"][i]))
                 continue
             entry = pending.setdefault(shard, {"n": int(batch["clips"][i]), "batched": bool(batch["batched"][i]), "clips": {}})
             entry["clips"][int(batch["index"][i])] = (np.asarray(batch["joints"][i]), json.loads(batch["report"][i]))
             if len(entry["clips"]) == entry["n"]:
-                _close(shard, out, summary, closed, pending)
+                _close(shard, out, summary, closed, pending, settings)
     for shard in map(str, todo):
         if shard not in closed:  # every clip row comes back unless the pipeline lost one
-            _close(shard, out, summary, closed, pending, error="not every clip came back from the workers")
+            _close(shard, out, summary, closed, pending, settings, error="not every clip came back from the workers")
 
 
-def _close(shard: str, out: Path, summary: CorpusSummary, closed: set, pending: dict, *, error: str | None = None):
+def _close(shard: str, out: Path, summary: CorpusSummary, closed: set, pending: dict, settings: dict, *,
+           error: str | None = None):
     """Write ``shard``'s output and report (or its failure) and count it."""
     closed.add(shard)
     entry = pending.pop(shard, None)
     if error is None:
         clips = [entry["clips"][i] for i in range(entry["n"])]
         try:
-            closing = write_shard(Path(shard), out, [c[0] for c in clips], entry["batched"], [c[1] for c in clips])
+            closing = write_shard(Path(shard), out, [c[0] for c in clips], entry["batched"], [c[1] for c in clips],
+                                  settings)
         except OSError as e:
             error = f"could not write its output: {e}"
         else:

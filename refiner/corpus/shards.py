@@ -1,11 +1,14 @@
 """The files of a corpus run: which shards there are, where each one's outputs go, and whether they are complete.
 
 Every input shard ``<stem>.npy|.npz`` gives ``OUT/<stem>.npy`` (``.npz`` when its clips differ in length; the same
-layout as ``motion-refiner refine``) and ``OUT/<stem>.report.jsonl``: one line per clip (its refinement report)
+layout as ``motion-refiner refine`` writes joints in: always joints, never an adapter's own format such as MDM's
+``results.npy``) and ``OUT/<stem>.report.jsonl``: one line per clip (its refinement report)
 and a last line that closes the shard (``"status": "done"`` with the output's sha256, or ``"failed"`` with the
 error). Both are written under a temporary name and renamed (``os.replace``), the output first: a shard is
-complete when its report's last line says ``done`` and the output it names has that sha256, so a run killed at
-any point leaves shards that are either complete or redone by the next run. Nothing here imports Ray.
+complete when its report's last line says ``done``, the output it names has that sha256 and the shard itself still
+has the ``input_sha256`` it was refined from (a shard regenerated, or another folder's shard of the same name, is
+redone), so a run killed at any point leaves shards that are either complete or redone by the next run. Nothing
+here imports Ray.
 """
 from __future__ import annotations
 
@@ -53,23 +56,26 @@ def report_path(shard: Path, out: Path) -> Path:
     return Path(out) / f"{Path(shard).stem}.report.jsonl"
 
 
-def is_complete(shard: Path, out: Path) -> bool:
-    """Whether ``shard``'s report closes with ``done`` and its output is there with the sha256 the report names."""
+def is_complete(shard: Path, out: Path, settings: dict | None = None) -> bool:
+    """Whether ``shard``'s report closes with ``done``, its output is there with the sha256 the report names,
+    ``shard`` is the file it was refined from (same sha256) and it was refined with these ``settings``."""
     report = report_path(shard, out)
     try:
         last = json.loads(report.read_text().rstrip("\n").rsplit("\n", 1)[-1])
         output = Path(out) / last["output"]
-        return last.get("status") == "done" and _sha256(output) == last["sha256"]
+        return (last.get("status") == "done" and _sha256(output) == last["sha256"]
+                and _sha256(Path(shard)) == last["input_sha256"] and last.get("settings") == settings)
     except (OSError, ValueError, KeyError, TypeError):  # missing, half-written or foreign: redo the shard
         return False
 
 
-def write_shard(shard: Path, out: Path, refined: list[np.ndarray], batched: bool, reports: list[dict]) -> dict:
+def write_shard(shard: Path, out: Path, refined: list[np.ndarray], batched: bool, reports: list[dict],
+                settings: dict | None = None) -> dict:
     """Write ``shard``'s refined clips (each ``(T, J, 3)`` float32 metres) and its report; returns the closing line.
 
     ``batched``: the shard held ``(N, T, J, 3)`` (written back so); clips of different lengths go to an ``.npz``
     (``clip_000``, ...), as ``motion-refiner refine`` writes them. ``reports``: each clip's report dict with its
-    ``n_frames`` and ``frames_changed``.
+    ``n_frames`` and ``frames_changed``. ``settings``: what it was refined with (a rerun with others redoes it).
     """
     out = Path(out)
     ragged = len({len(c) for c in refined}) > 1
@@ -84,7 +90,8 @@ def write_shard(shard: Path, out: Path, refined: list[np.ndarray], batched: bool
     os.replace(tmp, target)
     closing = {"shard": str(shard), "output": target.name, "status": "done", "clips": len(refined),
                "frames": int(sum(r["n_frames"] for r in reports)),
-               "frames_changed": int(sum(r["frames_changed"] for r in reports)), "sha256": _sha256(target)}
+               "frames_changed": int(sum(r["frames_changed"] for r in reports)), "sha256": _sha256(target),
+               "input_sha256": _sha256(Path(shard)), "settings": settings}
     _write_lines(report_path(shard, out), [{"clip": i, **r} for i, r in enumerate(reports)] + [closing])
     return closing
 

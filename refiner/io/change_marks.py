@@ -4,8 +4,8 @@ A report is a :class:`~refiner.refinement.report.RefinementReport` or its ``to_d
 Two things are kept apart, since a step may change frames no detector flagged (a whole-clip step) and a detector
 may flag frames no step changed (a change not kept):
 
-- *flagged*: the frames a detector found flawed: the ``flagged_frames`` field (the motion method's), else frames whose ``flaw_probability`` is above the report's ``threshold``, the ``flagged_anchors`` and the
-  inner frames of ``flagged_transitions`` whose residual was above its threshold;
+- *flagged*: the frames a detector found flawed: the ``flagged_frames`` field (the motion method's), the
+  ``flagged_anchors`` and the inner frames of ``flagged_transitions`` whose residual was above its threshold;
 - *changes*: the ``changes`` entries (``step``, ``start``, ``stop``; ``kept`` True unless it says otherwise) and
   the ``not_kept`` entries (runs a step proposed and left as given).
 
