@@ -56,3 +56,14 @@ def test_bad_records_are_value_errors_and_nothing_is_written(tmp_path, capsys, d
     out = tmp_path / "page.md"
     assert main(["bench", "markdown", "--records", str(tmp_path), "--out", str(out)]) != 0
     assert words in capsys.readouterr().err and not out.exists()
+
+
+def test_readme_table_is_in_step_with_the_records():
+    """The README's table of current figures is the one the records make (`bench markdown --readme README.md`)."""
+    from refiner.cli.bench_markdown import measured_table, with_measured
+
+    readme = (REPO / "README.md").read_text()
+    assert with_measured(readme, measured_table(RECORDS)) == readme, (
+        "README.md's measured table is out of step with docs/records: run `" + RECIPE[-1] + "`.")
+    with pytest.raises(ValueError, match="measured"):
+        with_measured("no block here", "| table |")

@@ -28,7 +28,9 @@ def bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, help="folder for REPORT.md, plots and <suite>.json (the figures as "
                                                           "records); markdown: the page (default docs/benchmarks.md)")
     p.add_argument("--records", type=Path, default=Path("docs/records"),
-                   help="markdown: the folder of heldout.json and noharm.json (default docs/records)")
+                   help="markdown: the folder of the suites' records (default docs/records)")
+    p.add_argument("--readme", type=Path, default=None,
+                   help="markdown: also write the table of current figures into this README's measured block")
     p.add_argument("--quick", action="store_true", help="tiny configuration (for tests)")
     p.add_argument("--stride", type=int, default=1, help="flaws, skeletons, heldout: keep every N-th held-out clip (skeletons default 4)")
     p.add_argument("--severity", type=int, action="append", choices=[1, 2, 3], help="flaws: only these severities")
@@ -41,8 +43,8 @@ def bench_arguments(p: argparse.ArgumentParser) -> None:
 
 def bench_run(args: argparse.Namespace) -> int:
     if args.suite == "markdown":
-        out = write_benchmarks_markdown(args.records, args.out or Path("docs/benchmarks.md"))
-        print(f"{out} written from the records in {args.records}")
+        out = write_benchmarks_markdown(args.records, args.out or Path("docs/benchmarks.md"), args.readme)
+        print(f"{out}{f' and {args.readme}' if args.readme else ''} written from the records in {args.records}")
         return 0
     return run_benchmarks(args.suite, data=args.data, out=args.out, quick=args.quick, stride=args.stride,
                           severities=tuple(args.severity) if args.severity else None, weights=args.weights)

@@ -1,4 +1,5 @@
-"""``motion-refiner bench markdown``: ``docs/benchmarks.md`` written from the bench records, the only way it is made.
+"""``motion-refiner bench markdown``: ``docs/benchmarks.md`` and the README's table of current figures, written from
+the bench records (the only way either is made).
 
 The records are the ``<suite>.json`` files ``motion-refiner bench SUITE --out DIR`` writes (:data:`SUITES_SHOWN`,
 committed under ``docs/records/``); each suite's section is the one ``bench`` prints
@@ -11,15 +12,24 @@ from pathlib import Path
 
 from refiner.cli.bench_tables import SECTIONS
 
-__all__ = ["SUITES_SHOWN", "RECIPE", "benchmarks_markdown", "write_benchmarks_markdown"]
+__all__ = ["SUITES_SHOWN", "RECIPE", "MEASURED", "benchmarks_markdown", "measured_table", "with_measured",
+           "write_benchmarks_markdown"]
 
 #: The suites the page shows, in order.
-SUITES_SHOWN = ("heldout", "noharm")
+SUITES_SHOWN = ("heldout", "noharm", "generators", "speed", "corpus")
 
 #: The commands that make the records and the page (the page's header repeats them).
 RECIPE = ("motion-refiner bench heldout --stride 2 --out docs/records",
           "motion-refiner bench noharm --out docs/records",
-          "motion-refiner bench markdown --records docs/records --out docs/benchmarks.md")
+          "motion-refiner bench generators --out docs/records",
+          "motion-refiner bench speed --out docs/records",
+          "motion-refiner bench corpus --out docs/records",
+          "motion-refiner bench markdown --records docs/records --out docs/benchmarks.md --readme README.md")
+
+#: The README's table of current figures lies between these two lines.
+MEASURED = ("<!-- measured: made by `motion-refiner bench markdown --readme README.md`, do not edit -->", "<!-- /measured -->")
+
+_REAL_SETS = ("a2m_humanact12_xyz", "a2m_humanact12_lie", "a2m_ntu13", "a2m_cmu")
 
 
 def _record(records: Path, suite: str) -> dict:
@@ -69,10 +79,72 @@ def benchmarks_markdown(records) -> str:
     return "\n\n".join([header, *(SECTIONS[suite](recs[suite]) for suite in SUITES_SHOWN)]) + "\n"
 
 
-def write_benchmarks_markdown(records, out) -> Path:
-    """Write :func:`benchmarks_markdown` of ``records`` to the file ``out`` (its folder is made); returns ``out``."""
+def measured_table(records) -> str:
+    """The README's table of current figures against issue 44's targets, from the records folder ``records``;
+    ``ValueError`` when a record lacks a figure the table shows."""
+    records = Path(records)
+    try:
+        return _measured(*(_record(records, suite) for suite in SUITES_SHOWN))
+    except (KeyError, IndexError, TypeError) as e:
+        raise ValueError(f"a bench record in {str(records)!r} lacks a figure the README's table shows ({e!r}); "
+                         "make the records again with this version.") from e
+
+
+def _measured(h: dict, n: dict, g: dict, sp: dict, co: dict) -> str:
+    fam, mech = h["families"], h["mechanisms"]
+    angle = ", ".join(f"`{k}` {r['refined']:+.1f}" for k, r in mech.items() if r["family"] == "angle")
+    folds = [h["clean"][k] for k in h["clean"] if k != "all"]
+    sets = n["sets"]
+    touched = [f"{k} {100 * s['after']['clips_changed']:.1f} %" for k, s in sets.items() if s["after"]["clips_changed"]]
+    worse = [k for k, s in sets.items() if s["verdict"]["violated"]]
+    bones = [f"{k} {s['after']['bone_length_variation_pct']:.1f} %" for k, s in sets.items()
+             if s["after"]["bone_length_variation_pct"] >= 1.0]
+    real = [sets[k] for k in _REAL_SETS if k in sets]
+    acc = [sum(s[w]["accuracy_pct"] for s in real) / max(1, len(real)) for w in ("before", "after")]
+    fid = [(k.split("/")[0], g["rows"][k]["metrics"]["fid"], g["rows"][k.replace("generated", "refined")]["metrics"]["fid"])
+           for k in g["rows"] if k.endswith("/generated") and k.replace("generated", "refined") in g["rows"]]
+    speed = sp["devices"][0]
+    corpus = "; ".join(f"{r['name']} {r['clips_per_s']:.0f}" for r in co["rows"])
+    rows = [
+        (f"held-out mechanisms, mean % of added MPJPE removed (`bench heldout`, {h['clips']} clips)",
+         f"**{h['heldout_mean']:+.1f} %** (linear in-fill on the same flags {h['linear_mean']:+.1f} %)", ">= 40 %"),
+        ("families: " + " / ".join(fam), " / ".join(f"{v:+.1f}" for v in fam.values()) + " %", "none below 0"),
+        ("pose flaws made in joint angles (angle family)", f"{fam['angle']:+.1f} % ({angle})", ">= 30 %"),
+        ("mechanisms written blind (default weights)", ", ".join(f"`{k}` {r['refined']:+.1f} %" for k, r in h["blind"].items()), ""),
+        ("clean held-out clips: default / fold weights (cm moved, clips touched)",
+         f"{h['clean']['all']['cm_moved']:.3f} cm, {100 * h['clean']['all']['clips_touched']:.1f} % / at most "
+         f"{max(c['cm_moved'] for c in folds):.3f} cm, {100 * max(c['clips_touched'] for c in folds):.1f} %", "< 0.3 cm, <= 5 %"),
+        (f"no-harm suite, {len(sets)} sets (`bench noharm`)", f"sets worse on some figure: {', '.join(worse) or 'none'}; "
+         f"clips changed: {', '.join(touched) or 'none'}", "every set: no harm"),
+        ("bone-length variation after refinement", "sets at 1 % or more: " + (", ".join(bones) or "none"), "< 1 %"),
+        (f"real sets' accuracy, mean of {len(real)}", f"{acc[0]:.1f} -> {acc[1]:.1f} %", "up on average"),
+        (f"FID generated -> refined ({g['n_replications']} replications, 95 % interval; `bench generators`)",
+         "; ".join(f"{k} {a[0]:.2f} ± {a[1]:.2f} -> {b[0]:.2f} ± {b[1]:.2f}" for k, a, b in fid), "not worse"),
+        (f"speed, 60 frames: batch 1 / batch {sp['batch']} (`bench speed`)",
+         f"{speed['median_ms']:.1f} ms / {speed['clips_per_s']:.0f} clips/s", "<= 15 ms / >= 500 clips/s"),
+        (f"corpus, {co['clips']} clips in {co['shards']} shards, clips/s (`bench corpus`)", corpus, ""),
+    ]
+    return "\n".join(["| figure (command) | value | target (issue 44) |", "|---|---|---|",
+                      *(f"| {a} | {b} | {c} |" for a, b, c in rows)])
+
+
+def with_measured(readme: str, table: str) -> str:
+    """``readme`` text with the block between the :data:`MEASURED` lines replaced by ``table``."""
+    start, stop = MEASURED
+    if readme.count(start) != 1 or readme.count(stop) != 1 or readme.index(start) > readme.index(stop):
+        raise ValueError(f"the README must hold the lines {start!r} and {stop!r} once each, in that order.")
+    head, rest = readme.split(start)
+    return f"{head}{start}\n{table}\n{stop}{rest.split(stop, 1)[1]}"
+
+
+def write_benchmarks_markdown(records, out, readme=None) -> Path:
+    """Write :func:`benchmarks_markdown` of ``records`` to the file ``out`` (its folder is made) and, with ``readme``,
+    the :func:`measured_table` into that file's measured block; returns ``out``."""
     out = Path(out)
     text = benchmarks_markdown(records)  # read every record before anything is written
+    readme_text = with_measured(Path(readme).read_text(), measured_table(records)) if readme else None
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
+    if readme:
+        Path(readme).write_text(readme_text)
     return out
