@@ -198,3 +198,16 @@ def test_a_pickle_naming_code_is_refused_before_anything_runs(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "only arrays are loaded" in captured.err and "pwned" not in captured.out
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.real_data
+def test_a_writer_that_declines_gets_the_joints_written(clips, tmp_path, capsys, monkeypatch):
+    """A plugin's own-format writer may return None (it wrote nothing): the CLI then writes the refined joints."""
+    from refiner.plugins.manager import PluginManager
+
+    monkeypatch.setattr(PluginManager, "write_refined", lambda self, *a, **k: None)
+    src = tmp_path / "sample00_rep00.npy"
+    np.save(src, results_dict(clips)["motion"][0])
+    assert main(["refine", str(src), "--adapter", "mdm", "-o", str(tmp_path / "out")]) == 0, capsys.readouterr().err
+    joints = np.load(tmp_path / "out" / "sample00_rep00.npy")
+    assert joints.ndim == 4 and joints.shape[-2:] == (24, 3)  # (1, T, J, 3) joints, not MDM's (22, 3, T)

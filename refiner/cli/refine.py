@@ -241,13 +241,16 @@ def _refine_file(path: Path, target: Path, args, refiner, pm, skeleton: str, opt
         reports.append(report)
 
     target.parent.mkdir(parents=True, exist_ok=True)
-    if own_format:  # e.g. MDM's results.npy: same keys and layout, only the refined frames changed
-        pm.write_refined(args.adapter, main_out, raw, motions, refined)
-    elif ragged:
-        np.savez(main_out, **{f"clip_{i:03d}": m.joints for i, m in enumerate(refined)})
-    else:
-        stacked = np.stack([m.joints for m in refined])
-        np.save(main_out, stacked if batched else stacked[0])
+    # e.g. MDM's results.npy: same keys and layout, only the refined frames changed; a writer may decline (None)
+    if not own_format or pm.write_refined(args.adapter, main_out, raw, motions, refined) is None:
+        main_out = target.with_suffix(".npz") if len({m.n_frames for m in motions}) > 1 else target
+        if main_out != target and main_out.exists() and not args.force:
+            raise ValueError(f"refusing to overwrite {main_out}; pass --force.")
+        if main_out.suffix == ".npz":
+            np.savez(main_out, **{f"clip_{i:03d}": m.joints for i, m in enumerate(refined)})
+        else:
+            stacked = np.stack([m.joints for m in refined])
+            np.save(main_out, stacked if batched else stacked[0])
     written = [main_out]
     if args.report:
         payload = {"input": str(path), "output": str(main_out), "adapter": args.adapter, "method": refiner.method,
