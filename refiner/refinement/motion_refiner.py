@@ -9,6 +9,7 @@ given; changed frames keep the clip's own bone lengths. Skeletons without a mode
 from __future__ import annotations
 
 import json
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,35 +25,41 @@ from refiner.refinement.motion_model import MotionModel
 from refiner.refinement.report import start_reports
 from refiner.refinement.steps.infill import InfillConfig, InfillStep, clip_scores
 
-__all__ = ["MotionRefiner", "calibrated_threshold", "write_motion_weights", "CLEAN_TOUCHED_SHARE"]
+__all__ = ["MotionRefiner", "CalibrationConfig", "calibrated_threshold", "write_motion_weights"]
 
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
-#: The share of clean held-out clips the detector may flag: the threshold is this quantile of their scores.
-CLEAN_TOUCHED_SHARE = 0.03
-#: Calibration pieces are this many frames (a generator's usual clip, 3 s at 20 fps).
-CALIBRATION_WINDOW = 60
 _CONVERTED = ("uestc", "humanml3d")
 #: Longest clip refined in one piece (30 minutes at 20 fps); longer input is refused rather than silently split.
 MAX_FRAMES = 36_000
 _CACHE: dict = {}
 
 
-def calibrated_threshold(model: MotionModel, clips, actions, *, share: float = CLEAN_TOUCHED_SHARE, min_run: int = 2,
-                         window: int = CALIBRATION_WINDOW) -> float:
-    """The flaw-probability threshold that flags ``share`` of ``window``-frame pieces of the clean ``clips`` (real,
-    unseen by the model): pieces, not clips, so long and short calibration clips weigh by their length."""
+@dataclass(frozen=True)
+class CalibrationConfig:
+    """How a motion model's threshold is calibrated on clean clips it never saw: the share of ``window``-frame pieces
+    (a generator's usual clip, 3 s at 20 fps) the detector may flag; ``min_run`` as in :class:`InfillConfig`."""
+
+    share: float = 0.03
+    window: int = 60
+    min_run: int = 2
+
+
+def calibrated_threshold(model: MotionModel, clips, actions, config: CalibrationConfig = CalibrationConfig()) -> float:
+    """The flaw-probability threshold that flags ``config.share`` of ``config.window``-frame pieces of the clean
+    ``clips`` (real, unseen by the model): pieces, not clips, so long and short calibration clips weigh by their length."""
     scores = []
     for c, a in zip(clips, actions):
         if len(c) < MIN_FRAMES:
             continue
         p = model.scan(np.asarray(c)[None], [a])[1]
-        starts = range(0, max(1, len(c) - window // 2), window)
-        scores += [clip_scores(p[:, s:s + window], min_run)[0] for s in starts]
-    return float(np.quantile(scores, 1.0 - share))
+        starts = range(0, max(1, len(c) - config.window // 2), config.window)
+        scores += [clip_scores(p[:, s:s + config.window], config.min_run)[0] for s in starts]
+    return float(np.quantile(scores, 1.0 - config.share))
 
 
 def write_motion_weights(folder, models: dict, thresholds: dict, *, skeleton: str, dataset: str, licence: str,
-                         split: str = "train", notes: dict | None = None) -> None:
+                         split: str = "train", calibration: CalibrationConfig = CalibrationConfig(),
+                         notes: dict | None = None) -> None:
     """Save motion ``models`` (name -> MotionModel; ``"all"`` is the default, ``"fold0"`` / ``"fold1"`` the benchmark's)
     with their calibrated ``thresholds`` and a ``manifest.json``."""
     folder = Path(folder)
@@ -64,7 +71,7 @@ def write_motion_weights(folder, models: dict, thresholds: dict, *, skeleton: st
         entries[name] = {"file": path.name, "sha256": file_sha256(path), "threshold": float(thresholds[name]),
                          "mechanisms": model.training_.get("mechanisms", [])}
     manifest = {"kind": "motion_model", "skeleton": skeleton, "dataset": dataset, "split": split, "licence": licence,
-                "models": entries, **(notes or {})}
+                "models": entries, "calibration_config": asdict(calibration), **(notes or {})}
     (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
 
 
