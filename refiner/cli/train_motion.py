@@ -3,7 +3,7 @@
 One one-thread process per model (the default, and with ``--folds`` the benchmark's two fold models), at most
 ``--jobs`` at a time; each writes ``progress.log`` and resumes from its checkpoint when rerun. Then every model is
 calibrated on clean clips it never saw and ``OUT/<dataset>-motion`` is written
-(:mod:`refiner.refinement.training.build_motion_weights`).
+(``_build``).
 
 Under ``torchrun --nproc_per_node N -m refiner train-motion ...`` the N processes train each model together, one
 model after another (data-parallel: each draws its part of every batch, :func:`~refiner.refinement.training.motion_training.train_motion_model`);
@@ -81,8 +81,33 @@ def _train_together(args: argparse.Namespace, runs: Path, jobs: list) -> int:
 
 
 def _build(args: argparse.Namespace, runs: Path) -> int:
-    """Calibrate the trained models and write ``OUT/<dataset>-motion``."""
-    from refiner.refinement.training.build_motion_weights import main as build
+    """Calibrate the trained models (as shipped: float16 weights) on the clean clips none of them learned on
+    (:func:`~refiner.refinement.training.motion_training.training_split`) and write ``OUT/<dataset>-motion``."""
+    import torch
 
-    data = ["--data", str(args.data)] if args.data else []
-    return build(["--runs", str(runs), "--out", str(args.out / f"{args.dataset}-motion"), "--dataset", args.dataset, *data])
+    from refiner.io.datasets import load_dataset
+    from refiner.refinement.motion_model import MotionModel
+    from refiner.refinement.motion_refiner import calibrated_threshold, write_motion_weights
+    from refiner.refinement.training.motion_training import training_split
+
+    torch.set_num_threads(1)
+    ds = load_dataset(args.dataset, args.data)
+    learn, calibrate = training_split(ds)
+    models = {name: MotionModel.load(runs / folder / "motion_model.safetensors")
+              for name, folder in _MODELS.items() if (runs / folder / "motion_model.safetensors").is_file()}
+    for m in models.values():
+        for t in m.network_.state_dict().values():
+            if t.is_floating_point():
+                t.copy_(t.half().float())
+    thresholds = {name: calibrated_threshold(m, [ds[i].joints for i in calibrate], [ds[i].action for i in calibrate])
+                  for name, m in models.items()}
+    print("thresholds", thresholds, flush=True)
+    write_motion_weights(args.out / f"{args.dataset}-motion", models, thresholds, skeleton=ds[0].skeleton,
+                         dataset=f"{args.dataset}: {len(learn)} clips", licence=_LICENCES[args.dataset],
+                         notes={"calibration": f"{len(calibrate)} clean clips of other subjects"})
+    return 0
+
+
+_LICENCES = {"humanact12": "trained on HumanAct12 (PHSPD): academic, non-commercial use only",
+             "cmu_mocap": "trained on the CMU Graphics Lab Motion Capture Database subset: free for all uses"}
+_MODELS = {"all": "mm_all", "fold0": "mm_0", "fold1": "mm_1"}

@@ -10,7 +10,7 @@ import numpy as np
 
 from refiner.core.skeletons import Skeleton, get_skeleton
 
-__all__ = ["to_bone_directions", "from_bone_directions", "subtree_bones", "blend_directions"]
+__all__ = ["to_bone_directions", "from_bone_directions", "subtree_bones", "blend_directions", "retimed"]
 
 _EPS = 1e-9
 
@@ -57,3 +57,16 @@ def blend_directions(a, b, weight) -> np.ndarray:
     w = np.asarray(weight, dtype=np.float64)[..., None]
     d = (1.0 - w) * a + w * b
     return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), _EPS)
+
+
+def retimed(joints, times, skeleton: Skeleton | str) -> np.ndarray:
+    """Frames of ``joints (T, J, 3)`` metres at fractional ``times (T',)`` (clipped to the clip): root linear, bone
+    directions blended, bone lengths of the earlier frame, so no bone stretches -> ``(T', J, 3)`` float64."""
+    x = np.asarray(joints, dtype=np.float64)
+    t = np.clip(np.asarray(times, dtype=np.float64), 0, len(x) - 1)
+    lo = np.floor(t).astype(int)
+    hi = np.minimum(lo + 1, len(x) - 1)
+    f = t - lo
+    root, dirs, lengths = to_bone_directions(x, skeleton)
+    new_root = (1 - f)[:, None] * root[lo] + f[:, None] * root[hi]
+    return from_bone_directions(new_root, blend_directions(dirs[lo], dirs[hi], f[:, None]), lengths[lo], skeleton)

@@ -1,9 +1,9 @@
 """The default refiner: a declared list of steps around one learned model of motion.
 
-:class:`MotionRefiner` checks the input, runs its declared steps (today one, :class:`~refiner.refinement.steps.infill.InfillStep`:
-recognition and in-filling by the motion model; a rigid-bones step did not earn its place, ``docs/decisions.md`` D10)
-and reports each change. Frames no step changed come back exactly as
-given; changed frames keep the clip's own bone lengths. Skeletons without a model of their own (``uestc``,
+:class:`MotionRefiner` checks the input, runs its declared steps (today one, :class:`~refiner.refinement.steps.retime.RetimeStep`:
+the motion model's recognition, flagged runs re-timed, kept where verified; the model's in-fill and a rigid-bones step
+did not earn their place, ``docs/decisions.md`` D10, D20) and reports each change. Frames no step changed come back
+exactly as given; changed frames keep the clip's own bone lengths. Skeletons without a model of their own (``uestc``,
 ``humanml3d``) are refined through HumanAct12's: converted in, refined, and only the change converted back.
 """
 from __future__ import annotations
@@ -23,7 +23,8 @@ from refiner.core.validation import check_joints
 from refiner.refinement.inputs import MIN_FRAMES, check_metres, check_metres_each, thread_limits
 from refiner.refinement.motion_model import MotionModel
 from refiner.refinement.report import start_reports
-from refiner.refinement.steps.infill import InfillConfig, InfillStep, clip_scores
+from refiner.refinement.steps.infill import InfillConfig, clip_scores
+from refiner.refinement.steps.retime import RetimeStep
 
 __all__ = ["MotionRefiner", "CalibrationConfig", "calibrated_threshold", "write_motion_weights"]
 
@@ -95,7 +96,7 @@ class MotionRefiner:
         self.model, self.config, self.threads = model, config, threads
         self.skeleton = get_skeleton(skeleton or model.skeleton).name
         self.action_names = model.action_names
-        self.steps = (InfillStep(model, config),)
+        self.steps = (RetimeStep(model, config),)
 
     @classmethod
     def pretrained(cls, skeleton: str = "humanact12", *, model: str = "all", weights=None, **options) -> "MotionRefiner":
@@ -180,6 +181,9 @@ class MotionRefiner:
         return out, reports
 
 
+_HOW = {"infill": "in-filled from context by the motion model", "retime": "re-timed along its own path at an even pace"}
+
+
 def _why_not(entry: dict) -> str:
     return f"worse on {', '.join(entry['worse'])}" if entry["worse"] else "not more real"
 
@@ -189,6 +193,7 @@ def _change(entry: dict, model: MotionModel) -> dict:
     skel = get_skeleton(model.skeleton)
     names = [skel.joint_names[skel.bones[p, 1]] if p < len(skel.bones) else "root" for p in entry["parts"]]
     before, after = entry["flaw_probability"]
-    reason = f"flaw probability {before:.2f} -> {after:.2f}; in-filled from context by the motion model"
+    how = _HOW.get(entry["step"], entry["step"])
+    reason = f"flaw probability {before:.2f} -> {after:.2f}; {how}"
     return {"step": entry["step"], "start": entry["start"], "stop": entry["stop"], "parts": names, "kept": entry["kept"],
             "reason": reason if entry["kept"] else f"{reason}, not kept: {_why_not(entry)}"}

@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from refiner.core.bone_directions import blend_directions, from_bone_directions, subtree_bones, to_bone_directions
+from refiner.core.bone_directions import blend_directions, from_bone_directions, retimed, subtree_bones, to_bone_directions
 from refiner.core.rotations import rotvec_to_rotmat
 from refiner.core.signal import smoothstep
 from refiner.core.skeletons import get_skeleton
@@ -134,16 +134,6 @@ def position_blend(clip, rng, severity=1.0, *, skeleton="humanact12"):
     return (x[:, skel.root:skel.root + 1] + (1 - k) * rel + k * src).astype(np.float32)
 
 
-def _retimed(x, times, skel):
-    """Frames of ``x`` at fractional ``times``: root linear, bone directions blended, lengths of the earlier frame."""
-    lo = np.clip(np.floor(times).astype(int), 0, len(x) - 1)
-    hi = np.clip(lo + 1, 0, len(x) - 1)
-    f = times - lo
-    root, dirs, lengths = to_bone_directions(x, skel)
-    new_root = (1 - f)[:, None] * root[lo] + f[:, None] * root[hi]
-    return from_bone_directions(new_root, blend_directions(dirs[lo], dirs[hi], f[:, None]), lengths[lo], skel)
-
-
 def time_hold(clip, rng, severity=1.0, *, skeleton="humanact12"):
     """The window's first pose held, then a jump to where the motion is (a freeze)."""
     skel, x, start, stop, w = _setup(clip, rng, skeleton)
@@ -158,7 +148,7 @@ def time_stall(clip, rng, severity=1.0, *, skeleton="humanact12"):
     u = np.linspace(0, 1, stop - start + 1)
     times = np.arange(len(x), dtype=np.float64)
     times[start:stop + 1] = start + (stop - start) * u ** (1 + 2 * severity)
-    return _retimed(x, times, skel).astype(np.float32)
+    return retimed(x, times, skel).astype(np.float32)
 
 
 def time_reverse(clip, rng, severity=1.0, *, skeleton="humanact12"):
@@ -168,7 +158,7 @@ def time_reverse(clip, rng, severity=1.0, *, skeleton="humanact12"):
     times = np.arange(len(x), dtype=np.float64)
     times[start:start + half] = start + np.arange(half)
     times[start + half:stop] = start + half - 1 - np.arange(stop - start - half) * min(1.0, severity)
-    return _retimed(x, np.clip(times, 0, len(x) - 1), skel).astype(np.float32)
+    return retimed(x, times, skel).astype(np.float32)
 
 
 def time_skip(clip, rng, severity=1.0, *, skeleton="humanact12"):
@@ -177,7 +167,7 @@ def time_skip(clip, rng, severity=1.0, *, skeleton="humanact12"):
     jump = max(2, int(round((stop - start) * 0.5 * min(1.0, severity))))
     times = np.arange(len(x), dtype=np.float64)
     times[start:stop] = np.minimum(np.arange(start, stop) + jump, stop)
-    return _retimed(x, np.clip(times, 0, len(x) - 1), skel).astype(np.float32)
+    return retimed(x, times, skel).astype(np.float32)
 
 
 def _root_move(clip, rng, skeleton, direction_fn, metres):

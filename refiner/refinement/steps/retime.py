@@ -1,0 +1,51 @@
+"""Re-timing: each flagged run of frames played again along its own path at an even pace (the paper's transition
+re-timing), kept where verified.
+
+Generators stall, skip ahead and catch up: the poses are right and their timing is wrong. ``detect`` and ``verify``
+are the motion model's (:class:`~refiner.refinement.steps.infill.InfillStep`); ``propose`` re-samples the frames of
+each flagged run, between the kept frames that bound it, at even steps of the body's path length (mean joint
+displacement); every frame keeps its own bone lengths. Chosen over the in-fill on the calibration subjects (``docs/decisions.md`` D20).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from refiner.core.bone_directions import from_bone_directions, retimed, to_bone_directions
+from refiner.core.skeletons import get_skeleton
+from refiner.refinement.steps.base import runs
+from refiner.refinement.steps.infill import InfillStep
+
+__all__ = ["RetimeStep", "even_pace"]
+
+
+def even_pace(joints, frames, skeleton) -> np.ndarray:
+    """``joints (T, J, 3)`` metres with each run of ``frames (T,)`` bool re-timed so that the body covers its path from
+    the kept frame before the run to the kept frame after it in equal steps (poses taken from the path, bone lengths
+    each frame's own); other frames exactly as given."""
+    x = np.asarray(joints, dtype=np.float64)
+    out = x.copy()
+    step = np.linalg.norm(np.diff(x, axis=0), axis=-1).mean(-1)  # (T - 1,) metres per frame
+    root, lengths = get_skeleton(skeleton).root, to_bone_directions(x, skeleton)[2]
+    for s, e in runs(frames):
+        a, b = max(s - 1, 0), min(e, len(x) - 1)
+        path = np.concatenate([[0.0], np.cumsum(step[a:b])])
+        if b - a < 2 or path[-1] <= 0:
+            continue
+        times = np.interp(np.linspace(0, path[-1], b - a + 1), path, np.arange(a, b + 1, dtype=np.float64))
+        moved = retimed(x, times[1:-1], skeleton)
+        _, dirs, _ = to_bone_directions(moved, skeleton)  # each frame keeps its own bone lengths
+        out[a + 1:b] = from_bone_directions(moved[:, root], dirs, lengths[a + 1:b], skeleton)
+    return out
+
+
+class RetimeStep(InfillStep):
+    """The motion model's detect / verify around :func:`even_pace` (see the module docstring)."""
+
+    name = "retime"
+
+    def propose(self, clips, actions, flagged, infill=None) -> np.ndarray:
+        """The clips with each run of flagged frames (any part) re-timed by :func:`even_pace`; ``infill``, given, makes
+        this the in-fill's proposal instead (the benchmark's stand-ins)."""
+        if infill is not None:
+            return super().propose(clips, actions, flagged, infill=infill)
+        return np.stack([even_pace(c, f.any(1), self.model.skeleton) for c, f in zip(clips, flagged)])
