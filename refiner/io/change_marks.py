@@ -24,8 +24,8 @@ from refiner.io.skeleton_drawing import FLAG
 __all__ = ["Change", "ChangeMarks", "read_marks", "STEP_COLOURS", "NOT_KEPT_HATCH", "draw_timeline", "marks_legend"]
 
 #: Colours of the shipped steps; other steps take :data:`_SPARE` colours in order. None is a bone or flag colour.
-STEP_COLOURS = {"infill": "#ff7f0e", "anchor": "#9467bd", "transition": "#8c564b", "concept_snap": "#e377c2"}
-_SPARE = ("#17becf", "#bcbd22", "#7f7f7f", "#aec7e8", "#c5b0d5")
+STEP_COLOURS = {"retime": "#ff7f0e", "infill": "#bcbd22", "anchor": "#9467bd", "transition": "#8c564b", "concept_snap": "#e377c2"}
+_SPARE = ("#17becf", "#7f7f7f", "#aec7e8", "#c5b0d5")
 NOT_KEPT_HATCH = "////"  # a change not kept: hatched in its step's colour
 
 

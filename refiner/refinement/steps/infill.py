@@ -57,6 +57,8 @@ class InfillStep:
     """The motion model's detect / propose / verify / report on a batch of clips of one skeleton."""
 
     name = "infill"
+    #: Whether ``propose`` moves every part of a flagged run's frames (then the report names them all).
+    moves_whole_body = False
 
     def __init__(self, model: MotionModel, config: InfillConfig):
         self.model, self.config = model, config
@@ -119,7 +121,7 @@ class InfillStep:
                 worse = harms(window_figures(given[i], s, e, skel, ground), window_figures(proposed[i], s, e, skel, ground),
                               jerk_share=self.config.jerk_share, slack_m=self.config.slack_m)
                 kept = after_p < before_p - self.config.min_gain and not worse
-                parts = np.flatnonzero(flagged[i, s:e].any(0)).tolist()
+                parts = np.flatnonzero(flagged[i, s:e].any(0) | self.moves_whole_body).tolist()
                 entries.append({"step": self.name, "start": s, "stop": e, "parts": parts, "kept": kept,
                                 "flaw_probability": [round(before_p, 3), round(after_p, 3)], "worse": worse})
                 if kept:

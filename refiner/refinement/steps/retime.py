@@ -42,6 +42,7 @@ class RetimeStep(InfillStep):
     """The motion model's detect / verify around :func:`even_pace` (see the module docstring)."""
 
     name = "retime"
+    moves_whole_body = True
 
     def propose(self, clips, actions, flagged, infill=None) -> np.ndarray:
         """The clips with each run of flagged frames (any part) re-timed by :func:`even_pace`; ``infill``, given, makes
