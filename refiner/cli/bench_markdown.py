@@ -119,7 +119,7 @@ def _measured(h: dict, n: dict, g: dict, sp: dict, co: dict) -> str:
         ("bone-length variation after refinement", "sets at 1 % or more: " + (", ".join(bones) or "none"), "< 1 %"),
         (f"real sets' accuracy, mean of {len(real)}", f"{acc[0]:.1f} -> {acc[1]:.1f} %", "up on average"),
         (f"FID generated -> refined ({g['n_replications']} replications, 95 % interval; `bench generators`)",
-         "; ".join(f"{k} {a[0]:.2f} ± {a[1]:.2f} -> {b[0]:.2f} ± {b[1]:.2f}" for k, a, b in fid), "not worse"),
+         "; ".join(f"{k} {a[0]:.3f} ± {a[1]:.3f} -> {b[0]:.3f} ± {b[1]:.3f}" for k, a, b in fid), "not worse"),
         (f"speed, 60 frames: batch 1 / batch {sp['batch']} (`bench speed`)",
          f"{speed['median_ms']:.1f} ms / {speed['clips_per_s']:.0f} clips/s", "<= 15 ms / >= 500 clips/s"),
         (f"corpus, {co['clips']} clips in {co['shards']} shards, clips/s (`bench corpus`)", corpus, ""),
