@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 from refiner.cli.bench_tables import SECTIONS
+from refiner.evaluation.bench_noharm import A2M_SETS
 
 __all__ = ["SUITES_SHOWN", "RECIPE", "MEASURED", "benchmarks_markdown", "measured_table", "with_measured",
            "write_benchmarks_markdown"]
@@ -29,7 +30,6 @@ RECIPE = ("motion-refiner bench heldout --stride 2 --out docs/records",
 #: The README's table of current figures lies between these two lines.
 MEASURED = ("<!-- measured: made by `motion-refiner bench markdown --readme README.md`, do not edit -->", "<!-- /measured -->")
 
-_REAL_SETS = ("a2m_humanact12_xyz", "a2m_humanact12_lie", "a2m_ntu13", "a2m_cmu")
 
 
 def _record(records: Path, suite: str) -> dict:
@@ -99,7 +99,7 @@ def _measured(h: dict, n: dict, g: dict, sp: dict, co: dict) -> str:
     worse = [k for k, s in sets.items() if s["verdict"]["violated"]]
     bones = [f"{k} {s['after']['bone_length_variation_pct']:.1f} %" for k, s in sets.items()
              if s["after"]["bone_length_variation_pct"] >= 1.0]
-    real = [sets[k] for k in _REAL_SETS if k in sets]
+    real = [sets[k] for k in A2M_SETS if k in sets]
     acc = [sum(s[w]["accuracy_pct"] for s in real) / max(1, len(real)) for w in ("before", "after")]
     fid = [(k.split("/")[0], g["rows"][k]["metrics"]["fid"], g["rows"][k.replace("generated", "refined")]["metrics"]["fid"])
            for k in g["rows"] if k.endswith("/generated") and k.replace("generated", "refined") in g["rows"]]

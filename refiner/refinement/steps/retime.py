@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from refiner.concepts.transitions import arc_length_profile
 from refiner.core.bone_directions import from_bone_directions, retimed, to_bone_directions
 from refiner.core.skeletons import get_skeleton
 from refiner.refinement.steps.base import runs
@@ -24,14 +25,13 @@ def even_pace(joints, frames, skeleton) -> np.ndarray:
     each frame's own); other frames exactly as given."""
     x = np.asarray(joints, dtype=np.float64)
     out = x.copy()
-    step = np.linalg.norm(np.diff(x, axis=0), axis=-1).mean(-1)  # (T - 1,) metres per frame
     root, lengths = get_skeleton(skeleton).root, to_bone_directions(x, skeleton)[2]
     for s, e in runs(frames):
         a, b = max(s - 1, 0), min(e, len(x) - 1)
-        path = np.concatenate([[0.0], np.cumsum(step[a:b])])
-        if b - a < 2 or path[-1] <= 0:
+        if b - a < 2 or not (x[a + 1:b + 1] != x[a]).any():  # nothing to pace, or the body stands still
             continue
-        times = np.interp(np.linspace(0, path[-1], b - a + 1), path, np.arange(a, b + 1, dtype=np.float64))
+        path = arc_length_profile(x[a:b + 1])
+        times = np.interp(np.linspace(0.0, 1.0, b - a + 1), path, np.arange(a, b + 1, dtype=np.float64))
         moved = retimed(x, times[1:-1], skeleton)
         _, dirs, _ = to_bone_directions(moved, skeleton)  # each frame keeps its own bone lengths
         out[a + 1:b] = from_bone_directions(moved[:, root], dirs, lengths[a + 1:b], skeleton)
