@@ -109,19 +109,16 @@ def _measured(h: dict, n: dict, g: dict, sp: dict, co: dict) -> str:
         (f"held-out mechanisms, mean % of added MPJPE removed (`bench heldout`, {h['clips']} clips)",
          f"**{h['heldout_mean']:+.1f} %** (linear in-fill on the same flags {h['linear_mean']:+.1f} %)", ">= 40 %"),
         ("families: " + " / ".join(fam), " / ".join(f"{v:+.1f}" for v in fam.values()) + " %", "none below 0"),
-        *([("generator preset (rigid bones after): mean; families", f"{h['generator_preset']['mean']:+.1f} %; " +
-            " / ".join(f"{v:+.1f}" for v in h["generator_preset"]["families"].values()) + " %", "")]
-          if "generator_preset" in h else []),
         ("pose flaws made in joint angles (angle family)", f"{fam['angle']:+.1f} % ({angle})", ">= 30 %"),
         ("mechanisms written blind (default weights)", ", ".join(f"`{k}` {r['refined']:+.1f} %" for k, r in h["blind"].items()), ""),
         ("clean held-out clips: default / fold weights (cm moved, clips touched)",
          f"{h['clean']['all']['cm_moved']:.3f} cm, {100 * h['clean']['all']['clips_touched']:.1f} % / at most "
          f"{max(c['cm_moved'] for c in folds):.3f} cm, {100 * max(c['clips_touched'] for c in folds):.1f} %", "< 0.3 cm, <= 5 %"),
-        (f"no-harm suite, {len(sets)} sets (`bench noharm`, generator preset)", f"sets worse on some figure: {', '.join(worse) or 'none'}; "
+        (f"no-harm suite, {len(sets)} sets (`bench noharm`)", f"sets worse on some figure: {', '.join(worse) or 'none'}; "
          f"clips changed: {', '.join(touched) or 'none'}", "every set: no harm"),
         ("bone-length variation after refinement", "sets at 1 % or more: " + (", ".join(bones) or "none"), "< 1 %"),
         (f"real sets' accuracy, mean of {len(real)}", f"{acc[0]:.1f} -> {acc[1]:.1f} %", "up on average"),
-        (f"FID generated -> refined ({g['n_replications']} replications, 95 % interval; `bench generators`, generator preset)",
+        (f"FID generated -> refined ({g['n_replications']} replications, 95 % interval; `bench generators`)",
          "; ".join(f"{k} {a[0]:.3f} ± {a[1]:.3f} -> {b[0]:.3f} ± {b[1]:.3f}" for k, a, b in fid), "not worse"),
         (f"speed, 60 frames: batch 1 / batch {sp['batch']} (`bench speed`)",
          f"{speed['median_ms']:.1f} ms / {speed['clips_per_s']:.0f} clips/s", "<= 15 ms / >= 500 clips/s"),

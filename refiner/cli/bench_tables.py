@@ -323,14 +323,13 @@ def _noharm(rec: dict) -> str:
 
 
 def _heldout_row(name: str, r: dict) -> list:
-    gen = f"{r['generator_preset']:+.1f}" if "generator_preset" in r else "-"
-    return [name, r.get("family", "blind"), r["weights"], f"{r['added_cm']:.2f}", f"{r['refined']:+.1f}", gen,
+    return [name, r.get("family", "blind"), r["weights"], f"{r['added_cm']:.2f}", f"{r['refined']:+.1f}",
             f"{r['linear']:+.1f}", "0.0", f"{100 * r['clips_touched']:.0f}"]
 
 
 def _heldout(rec: dict) -> str:
     header = ["mechanism", "family", "weights (never saw it)", "added error cm", "refined: % removed",
-              "generator preset", "linear in-fill, same flags", "as given", "clips touched %"]
+              "linear in-fill, same flags", "as given", "clips touched %"]
     rows = [_heldout_row(n, r) for n, r in rec["mechanisms"].items()] + [_heldout_row(n, r) for n, r in rec["blind"].items()]
     fams = ", ".join(f"{f} {v:+.1f}" for f, v in rec["families"].items())
     clean = "; ".join(f"{n}: {c['cm_moved']:.3f} cm, {100 * c['clips_touched']:.1f} % of clips touched" for n, c in rec["clean"].items())
@@ -340,16 +339,7 @@ def _heldout(rec: dict) -> str:
         "by someone who had not read the refiner) with the default weights. % of the added MPJPE removed.", "",
         markdown_table(header, rows), "",
         f"**Mean over held-out mechanisms: {rec['heldout_mean']:+.1f} %** (linear in-fill on the same flags "
-        f"{rec['linear_mean']:+.1f} %). Families: {fams}.", *_generator_preset(rec), "", f"Clean clips: {clean}."])
-
-
-def _generator_preset(rec: dict) -> list:
-    """The generator preset's line (its rigid-bones step after the default steps), where the record has it."""
-    if "generator_preset" not in rec:
-        return []
-    g = rec["generator_preset"]
-    fams = ", ".join(f"{f} {v:+.1f}" for f, v in g["families"].items())
-    return ["", f"Generator preset (`preset=\"generator\"`, rigid bones after): mean {g['mean']:+.1f} %; families: {fams}."]
+        f"{rec['linear_mean']:+.1f} %). Families: {fams}.", "", f"Clean clips: {clean}."])
 
 
 def _heldout_mechanism(payload: dict) -> str:

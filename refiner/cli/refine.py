@@ -45,9 +45,6 @@ def refine_arguments(p: argparse.ArgumentParser) -> None:
                         "and transition residuals); default: motion, concepts with --refiner")
     p.add_argument("--mode", default=None, choices=["full", "anchor", "transition"],
                    help="with --method concepts: which of its steps run (default full)")
-    p.add_argument("--preset", default=None, choices=["mocap", "generator"],
-                   help="method motion's steps: generator also puts stretched bones back within real lengths "
-                        "(default: generator with --adapter, else mocap)")
     p.add_argument("--fps", type=float, default=20.0, help="frame rate of joint files (default 20)")
     p.add_argument("--refiner", type=Path, default=None,
                    help="folder of a saved concepts refiner (`motion-refiner train`; default: shipped weights)")
@@ -97,8 +94,7 @@ def refine_run(args: argparse.Namespace) -> int:
         raise ValueError(f"IN {str(args.input)!r} does not exist.")
     if args.concept_snap and args.action is None:  # an inferred action is never snapped to: it would do nothing
         raise ValueError("`--concept-snap` needs `--action`: the anchors are snapped onto that action's concepts.")
-    preset = args.preset or ("generator" if args.adapter else "mocap")
-    refiner = _load_refiner(method, args.refiner, skeleton, args.concept_snap, preset)
+    refiner = _load_refiner(method, args.refiner, skeleton, args.concept_snap)
     pm = get_plugin_manager() if args.adapter is not None else None
     if pm is not None:
         pm.get_adapter(args.adapter)  # an unknown adapter is a usage error, not a per-file failure
@@ -129,14 +125,13 @@ def refine_run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def _load_refiner(method: str, folder: Path | None, skeleton: str, concept_snap: float, preset: str = "mocap"):
-    """The refiner of ``method``: the shipped one for ``skeleton`` (motion: with ``preset``), or the concepts refiner
-    saved in ``folder``."""
+def _load_refiner(method: str, folder: Path | None, skeleton: str, concept_snap: float):
+    """The refiner of ``method``: the shipped one for ``skeleton``, or the concepts refiner saved in ``folder``."""
     # these import torch: here, so that --help stays cheap
     if method == "motion":
         from refiner.refinement.motion_refiner import MotionRefiner
 
-        return MotionRefiner.pretrained(skeleton, preset=preset)
+        return MotionRefiner.pretrained(skeleton)
     from refiner.refinement.pipeline import Refiner
 
     snap = {"concept_snap": concept_snap} if concept_snap else {}

@@ -88,7 +88,6 @@ def _build(args: argparse.Namespace, runs: Path) -> int:
     from refiner.io.datasets import load_dataset
     from refiner.refinement.motion_model import MotionModel
     from refiner.refinement.motion_refiner import calibrated_threshold, write_motion_weights
-    from refiner.refinement.steps.rigid_bones import RigidBonesConfig, bone_bands
     from refiner.refinement.training.motion_training import training_split
 
     torch.set_num_threads(1)
@@ -103,9 +102,7 @@ def _build(args: argparse.Namespace, runs: Path) -> int:
     thresholds = {name: calibrated_threshold(m, [ds[i].joints for i in calibrate], [ds[i].action for i in calibrate])
                   for name, m in models.items()}
     print("thresholds", thresholds, flush=True)
-    rigid = RigidBonesConfig()
-    bands = bone_bands([ds[i].joints for i in learn], ds[0].skeleton, rigid.quantile, rigid.floor)
-    write_motion_weights(args.out / f"{args.dataset}-motion", models, thresholds, skeleton=ds[0].skeleton, bone_bands=bands,
+    write_motion_weights(args.out / f"{args.dataset}-motion", models, thresholds, skeleton=ds[0].skeleton,
                          dataset=f"{args.dataset}: {len(learn)} clips", licence=_LICENCES[args.dataset],
                          notes={"calibration": f"{len(calibrate)} clean clips of other subjects"})
     return 0

@@ -2,7 +2,7 @@
 
 The record (``generators.json``): ``per_action`` (samples per HumanAct12 action), ``n_replications``,
 ``reference_clips`` (real clips of subjects 11-12) and ``rows``: per ``<kind>/generated``,
-``<kind>/refined`` (by ``MotionRefiner.pretrained(preset="generator")``, as
+``<kind>/refined`` (by the default refiner, ``MotionRefiner.pretrained``, as
 :class:`~refiner.refinement.refined_generator.RefinedGenerator` refines) and ``real``
 (train clips of subjects 1-10), ``samples``, ``metrics``
 (:func:`~refiner.evaluation.protocol.evaluate` summary, metric -> ``[mean, 95 % half-width]``) and
@@ -58,7 +58,7 @@ def bench_generators(data: Path | None, out: Path | None, quick: bool, *, weight
     dataset, recognizer = load_humanact12_and_recognizer(data, hidden="random")
     real = dataset.split("test")
     # as RefinedGenerator refines a generator's clips: the default refiner
-    refiners = {"refined": MotionRefiner.pretrained("humanact12", weights=weights, preset="generator")}
+    refiners = {"refined": MotionRefiner.pretrained("humanact12", weights=weights)}
     # the paper's Table 1 protocol: 3,000 samples (250 per action), 20 replications
     per_action, n_rep = (3, 2) if quick else (250, 20)
     n_actions = len(dataset.action_names)

@@ -6,10 +6,8 @@ subjects 1-8 and is calibrated on 9-10). Mechanisms written blind (:mod:`refiner
 someone who had not read the refiner) are scored with the default weights, which never saw them either.
 
 Per mechanism: the share of the added error (MPJPE to the clean clip) the refiner removes, and the same for two
-stand-ins on the same flags (linear interpolation of the flagged parts in place of the first step's proposal, the
-later steps as they are; and leaving the frames as given, which is 0);
-per family their mean; ``generator_preset``: the same with the ``"generator"`` preset (its rigid-bones step after
-the default steps). Clean clips: cm moved and share touched. The record is ``heldout.json``.
+stand-ins on the same flags (linear interpolation of the flagged parts, and leaving the frames as given, which is 0);
+per family their mean. Clean clips: cm moved and share touched. The record is ``heldout.json``.
 """
 from __future__ import annotations
 
@@ -53,8 +51,6 @@ def _refine_all(refiner, clips, actions, *, linear: bool = False):
             step = refiner.steps[0]
             prob, flagged = step.detect(batch, acts)
             refined = step.verify(batch, step.propose(batch, acts, flagged, infill=linear_fill), acts, flagged, prob)[0]
-            for later in refiner.steps[1:]:  # the stand-in replaces the first step only
-                refined = later.refine(refined, acts)[0]
         else:
             refined = refiner.refine(batch, action=acts)
         for k, i in enumerate(idx):
@@ -76,7 +72,6 @@ def bench_heldout(data: Path | None, out: Path | None, quick: bool, *, stride: i
     if quick:
         clean, actions = clean[:12], actions[:12]
     refiners = {name: MotionRefiner.pretrained("humanact12", model=name, weights=weights) for name in ("all", "fold0", "fold1")}
-    rigid = MotionRefiner.pretrained("humanact12", weights=weights, preset="generator").steps[-1]
     rec = {"clips": len(clean), "subjects": [11, 12], "mechanisms": {}, "blind": {}, "clean": {}}
     for name, refiner in refiners.items():
         refined = _refine_all(refiner, clean, actions)
@@ -92,8 +87,6 @@ def bench_heldout(data: Path | None, out: Path | None, quick: bool, *, stride: i
             row[label] = 100 * removed_share_of(clean, flawed, refined)
             if not linear:
                 row["clips_touched"] = float(np.mean([np.abs(r - f).max() > 0 for r, f in zip(refined, flawed)]))
-                # the generator preset's last step, on the same refined clips
-                row["generator_preset"] = 100 * removed_share_of(clean, flawed, [rigid.refine(r[None])[0][0] for r in refined])
         row["added_cm"] = 100 * float(np.mean([_error(f[None], c[None])[0] for c, f in zip(clean, flawed)]))
         if hasattr(mech, "family"):
             row["family"] = mech.family
@@ -103,7 +96,4 @@ def bench_heldout(data: Path | None, out: Path | None, quick: bool, *, stride: i
     rec["families"] = {f: float(np.mean(v)) for f, v in fams.items() if v}
     rec["heldout_mean"] = float(np.mean([r["refined"] for r in rec["mechanisms"].values()]))
     rec["linear_mean"] = float(np.mean([r["linear"] for r in rec["mechanisms"].values()]))
-    gen = {f: [r["generator_preset"] for r in rec["mechanisms"].values() if r["family"] == f] for f in FAMILIES}
-    rec["generator_preset"] = {"families": {f: float(np.mean(v)) for f, v in gen.items() if v},
-                               "mean": float(np.mean([r["generator_preset"] for r in rec["mechanisms"].values()]))}
     return write_record(out, "heldout", rec)

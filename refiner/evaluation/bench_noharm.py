@@ -51,8 +51,8 @@ variation when it rises and ends at 1 % or more; accuracy when it drops by more 
 the worse figures.
 
 **The refiner**: ``refine(clips (B, T, J, 3), skeleton, actions) -> (B, T, J, 3)``, called once per set and clip
-length; default :class:`DefaultRefine`, ``MotionRefiner.pretrained(skeleton, weights=weights, preset="generator")``
-(the sets are generator output; a set whose skeleton has no motion model is ``skipped``).
+length; default :class:`DefaultRefine`, ``MotionRefiner.pretrained(skeleton, weights=weights)`` (a set whose
+skeleton has no motion model is ``skipped``).
 
 The record (``noharm.json``): ``sets`` (name -> ``skeleton``, ``clips``, ``recognizer``, ``refine_actions``,
 ``note``, ``before``, ``after``, ``verdict``), ``real`` (skeleton -> figures and ``clips``, or ``none``),
@@ -119,19 +119,18 @@ class ClipSet:
 
 
 class DefaultRefine:
-    """``MotionRefiner.pretrained(skeleton, weights=weights, preset=preset).refine(clips, action=actions)``, one
-    refiner per skeleton, loaded on first use or by :meth:`load`; the sets are generator output, so the
-    ``"generator"`` preset, as :class:`~refiner.refinement.refined_generator.RefinedGenerator` refines."""
+    """``MotionRefiner.pretrained(skeleton, weights=weights).refine(clips, action=actions)``, one
+    refiner per skeleton, loaded on first use or by :meth:`load`."""
 
-    def __init__(self, weights: Path | None = None, preset: str = "generator") -> None:
-        self.weights, self.preset, self._refiners = weights, preset, {}
+    def __init__(self, weights: Path | None = None) -> None:
+        self.weights, self._refiners = weights, {}
 
     def load(self, skeleton: str):
         if skeleton not in self._refiners:
             # imports torch: here, so that importing the suites stays cheap
             from refiner.refinement.motion_refiner import MotionRefiner
 
-            self._refiners[skeleton] = MotionRefiner.pretrained(skeleton, weights=self.weights, preset=self.preset)
+            self._refiners[skeleton] = MotionRefiner.pretrained(skeleton, weights=self.weights)
         return self._refiners[skeleton]
 
     def __call__(self, clips: np.ndarray, skeleton: str, actions: list) -> np.ndarray:
@@ -310,7 +309,7 @@ def bench_noharm(data: Path | None, out: Path | None, quick: bool, *, progress: 
     recognizers = {k: v for k, v in recognizers.items() if v is not None}
     rec = {"quick": quick, "n_hidden": n_hidden, "thresholds": THRESHOLDS, "units": UNITS,
            "tolerances": {k: {"kind": kind, "tolerance": tol} for k, kind, tol in TOLERANCES},
-           "refiner": (f"default: MotionRefiner.pretrained(skeleton, preset='generator'{f', weights={weights}' * bool(weights)})"
+           "refiner": (f"default: MotionRefiner.pretrained(skeleton{f', weights={weights}' * bool(weights)})"
                        if default else f"custom: {getattr(refine, '__name__', type(refine).__name__)}"),
            "sets": {}, "skipped": skipped}
     for name, s in clip_sets.items():

@@ -1,11 +1,9 @@
 """The default refiner: a declared list of steps around one learned model of motion.
 
-:class:`MotionRefiner` checks the input, runs the declared steps of its preset (:data:`PRESETS`:
-:class:`~refiner.refinement.steps.retime.RetimeStep`, the motion model's recognition with flagged runs re-timed; for
-generator output also :class:`~refiner.refinement.steps.rigid_bones.RigidBonesStep`; each change kept where
-verified; the model's in-fill did not earn its place, ``docs/decisions.md`` D20, D21) and reports each change.
-Frames no step changed come back exactly as given; re-timed frames keep their own bone lengths, the rigid-bones step
-puts them within real motion's. Skeletons without a model of their own (``uestc``,
+:class:`MotionRefiner` checks the input, runs its declared steps (today one, :class:`~refiner.refinement.steps.retime.RetimeStep`:
+the motion model's recognition, flagged runs re-timed, kept where verified; the model's in-fill and a rigid-bones step
+did not earn their place, ``docs/decisions.md`` D10, D20) and reports each change. Frames no step changed come back
+exactly as given; changed frames keep the clip's own bone lengths. Skeletons without a model of their own (``uestc``,
 ``humanml3d``) are refined through HumanAct12's: converted in, refined, and only the change converted back.
 """
 from __future__ import annotations
@@ -27,18 +25,14 @@ from refiner.refinement.motion_model import MotionModel
 from refiner.refinement.report import start_reports
 from refiner.refinement.steps.infill import InfillConfig, clip_scores
 from refiner.refinement.steps.retime import RetimeStep
-from refiner.refinement.steps.rigid_bones import RigidBonesStep
 
-__all__ = ["MotionRefiner", "CalibrationConfig", "calibrated_threshold", "write_motion_weights", "PRESETS"]
+__all__ = ["MotionRefiner", "CalibrationConfig", "calibrated_threshold", "write_motion_weights"]
 
 _WEIGHTS = Path(__file__).resolve().parents[1] / "weights"
 _CONVERTED = ("uestc", "humanml3d")
 #: Longest clip refined in one piece (30 minutes at 20 fps); longer input is refused rather than silently split.
 MAX_FRAMES = 36_000
 _CACHE: dict = {}
-#: Each preset's declared steps: ``mocap`` (the default) for captured or rigid-boned motion; ``generator`` adds the
-#: rigid-bones step for generators that regress joint positions, whose bones stretch (``docs/decisions.md`` D21).
-PRESETS = {"mocap": ("retime",), "generator": ("retime", "rigid_bones")}
 
 
 @dataclass(frozen=True)
@@ -65,11 +59,10 @@ def calibrated_threshold(model: MotionModel, clips, actions, config: Calibration
 
 
 def write_motion_weights(folder, models: dict, thresholds: dict, *, skeleton: str, dataset: str, licence: str,
-                         bone_bands=None, split: str = "train", calibration: CalibrationConfig = CalibrationConfig(),
+                         split: str = "train", calibration: CalibrationConfig = CalibrationConfig(),
                          notes: dict | None = None) -> None:
     """Save motion ``models`` (name -> MotionModel; ``"all"`` is the default, ``"fold0"`` / ``"fold1"`` the benchmark's)
-    with their calibrated ``thresholds``, the skeleton's ``bone_bands`` (:func:`~refiner.refinement.steps.rigid_bones.bone_bands`
-    of real clips; None: not written, and the rigid-bones step holds every bone rigid) and a ``manifest.json``."""
+    with their calibrated ``thresholds`` and a ``manifest.json``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     entries = {}
@@ -79,8 +72,7 @@ def write_motion_weights(folder, models: dict, thresholds: dict, *, skeleton: st
         entries[name] = {"file": path.name, "sha256": file_sha256(path), "threshold": float(thresholds[name]),
                          "mechanisms": model.training_.get("mechanisms", [])}
     manifest = {"kind": "motion_model", "skeleton": skeleton, "dataset": dataset, "split": split, "licence": licence,
-                "models": entries, "calibration_config": asdict(calibration),
-                **({"bone_bands": [round(float(b), 6) for b in bone_bands]} if bone_bands is not None else {}), **(notes or {})}
+                "models": entries, "calibration_config": asdict(calibration), **(notes or {})}
     (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
 
 
@@ -96,33 +88,21 @@ class MotionRefiner:
         The clips' skeleton when it differs from the model's (converted through it; ``uestc``, ``humanml3d``).
     threads : int or None, default=1
         torch and BLAS threads while refining (None: leave them as they are).
-    preset : {"mocap", "generator"}, default="mocap"
-        Which steps run (:data:`PRESETS`).
-    bone_bands : array of shape (B,), optional
-        The rigid-bones step's: how far each bone of the model's skeleton strays from its clip's median length in
-        real motion (the weights' manifest); None, and for a skeleton converted through the model's: every bone rigid.
     """
 
     method = "motion"
 
-    def __init__(self, model: MotionModel, config: InfillConfig, *, skeleton: str | None = None, threads: int | None = 1,
-                 preset: str = "mocap", bone_bands=None):
-        if preset not in PRESETS:
-            raise ValueError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}.")
-        self.model, self.config, self.threads, self.preset = model, config, threads, preset
+    def __init__(self, model: MotionModel, config: InfillConfig, *, skeleton: str | None = None, threads: int | None = 1):
+        self.model, self.config, self.threads = model, config, threads
         self.skeleton = get_skeleton(skeleton or model.skeleton).name
         self.action_names = model.action_names
-        # bones are held on the skeleton given, with the bands learnt for it (a converted one: every bone rigid)
-        bands = bone_bands if self.skeleton == model.skeleton else None
-        make = {"retime": lambda: RetimeStep(model, config), "rigid_bones": lambda: RigidBonesStep(self.skeleton, bands)}
-        self.steps = tuple(make[name]() for name in PRESETS[preset])
+        self.steps = (RetimeStep(model, config),)
 
     @classmethod
-    def pretrained(cls, skeleton: str = "humanact12", *, model: str = "all", weights=None, preset: str = "mocap",
-                   **options) -> "MotionRefiner":
+    def pretrained(cls, skeleton: str = "humanact12", *, model: str = "all", weights=None, **options) -> "MotionRefiner":
         """The shipped motion model of ``skeleton`` (``model``: ``"all"``, or ``"fold0"`` / ``"fold1"``, the benchmark's,
         each trained without one fold of flaw mechanisms); ``weights``: a folder holding ``<skeleton>-motion/``, looked
-        in first; ``preset``: :data:`PRESETS`. ``options`` replace fields of :class:`InfillConfig`."""
+        in first. ``options`` replace fields of :class:`InfillConfig`."""
         name = get_skeleton(skeleton).name
         base = "humanact12" if name in _CONVERTED else name
         folders = [Path(w) / f"{base}-motion" for w in ([weights] if weights else [])] + [_WEIGHTS / f"{base}-motion"]
@@ -140,7 +120,7 @@ class MotionRefiner:
                 raise ValueError(f"{path} does not match the sha256 in its manifest; reinstall or retrain it.")
             _CACHE[key] = MotionModel.load(path)
         config = InfillConfig(**{"threshold": entry["threshold"], **options})
-        return cls(_CACHE[key], config, skeleton=name, preset=preset, bone_bands=manifest.get("bone_bands"))
+        return cls(_CACHE[key], config, skeleton=name)
 
     def refine(self, seq, *, action=None, mode: str | None = None, return_report: bool = False):
         """Refine a Motion, ``(T, J, 3)`` or ``(B, T, J, 3)`` array or tensor; returns the same kind (see
@@ -174,32 +154,31 @@ class MotionRefiner:
     def _refine_batch(self, clips, actions, batched):
         reports = start_reports(clips.shape[1], actions, "full", self.action_names, batched=batched)
         known = [r.action for r in reports]
-        out = np.array(clips, dtype=np.float64)
+        out = np.array(clips, dtype=np.float32)
         if clips.shape[1] < MIN_FRAMES:
-            return out.astype(np.float32), reports
+            return out, reports
+        inner = clips if self.skeleton == self.model.skeleton else convert(clips, self.skeleton, self.model.skeleton)
+        refined = np.array(inner, dtype=np.float64)
         for step in self.steps:
-            own = step.skeleton == self.skeleton
-            inner = out if own else convert(out, self.skeleton, step.skeleton)
-            refined, changes, prob = step.refine(inner, known)
-            for r, p in zip(reports, [] if prob is None else prob):
+            refined, changes, prob = step.refine(refined, known)
+            for r, p in zip(reports, prob):
                 r.flaw_probability, r.threshold = p.max(1).round(4).tolist(), self.config.threshold
-            for i, (r, entries) in enumerate(zip(reports, changes)):
+            for r, entries in zip(reports, changes):
                 r.flagged_frames = sorted(set(r.flagged_frames).union(*(range(e["start"], e["stop"]) for e in entries)))
-                r.changes += [_change(e, step.skeleton) for e in entries if e["kept"]]
-                r.not_kept += [_change(e, step.skeleton) for e in entries if not e["kept"]]
+                r.changes += [_change(e, self.model) for e in entries if e["kept"]]
+                r.not_kept += [_change(e, self.model) for e in entries if not e["kept"]]
                 r.notes += [f"{e['step']}: frames {e['start']}-{e['stop']} not changed ({_why_not(e)})"
                             for e in entries if not e["kept"]]
-                frames = np.zeros(len(out[i]), bool)
-                for e in entries:
-                    frames[e["start"]:e["stop"]] |= e["kept"]
-                if not frames.any():
-                    continue
-                if own:
-                    out[i, frames] = refined[i, frames]
-                else:  # only the change goes back, so joints the conversion estimates stay as given
-                    delta = convert(refined[i, frames], step.skeleton, self.skeleton) - convert(inner[i, frames], step.skeleton, self.skeleton)
-                    out[i, frames] += delta
-        return out.astype(np.float32), reports
+        for i, r in enumerate(reports):
+            frames = r.changed_frames
+            if not frames.any():
+                continue
+            if self.skeleton == self.model.skeleton:
+                out[i, frames] = refined[i, frames]
+            else:  # only the change goes back, so joints the conversion estimates stay as given
+                delta = convert(refined[i, frames], self.model.skeleton, self.skeleton) - convert(inner[i, frames], self.model.skeleton, self.skeleton)
+                out[i, frames] = clips[i, frames] + delta
+        return out, reports
 
 
 _HOW = {"infill": "in-filled from context by the motion model", "retime": "re-timed along its own path at an even pace"}
@@ -209,15 +188,12 @@ def _why_not(entry: dict) -> str:
     return f"worse on {', '.join(entry['worse'])}" if entry["worse"] else "not more real"
 
 
-def _change(entry: dict, skeleton: str) -> dict:
-    """A step's run as a report entry: frames, parts (bones by their child joint, or the root) in words, whether it
-    was kept, and why."""
-    skel = get_skeleton(skeleton)
+def _change(entry: dict, model: MotionModel) -> dict:
+    """A step's run as a report entry: frames, parts in words, whether it was kept, and why."""
+    skel = get_skeleton(model.skeleton)
     names = [skel.joint_names[skel.bones[p, 1]] if p < len(skel.bones) else "root" for p in entry["parts"]]
-    if "reason" in entry:
-        reason = entry["reason"]
-    else:
-        before, after = entry["flaw_probability"]
-        reason = f"flaw probability {before:.2f} -> {after:.2f}; {_HOW.get(entry['step'], entry['step'])}"
+    before, after = entry["flaw_probability"]
+    how = _HOW.get(entry["step"], entry["step"])
+    reason = f"flaw probability {before:.2f} -> {after:.2f}; {how}"
     return {"step": entry["step"], "start": entry["start"], "stop": entry["stop"], "parts": names, "kept": entry["kept"],
             "reason": reason if entry["kept"] else f"{reason}, not kept: {_why_not(entry)}"}

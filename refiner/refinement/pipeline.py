@@ -232,7 +232,7 @@ class Refiner:
 
 
 def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full", return_report: bool = False,
-           refiner=None, method: str = "motion", preset: str = "mocap"):
+           refiner=None, method: str = "motion"):
     """Refine a motion with the shipped weights.
 
     Parameters
@@ -254,9 +254,6 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
     method : {"motion", "concepts"}, default="motion"
         ``"motion"``: :meth:`MotionRefiner.pretrained(skeleton) <refiner.refinement.motion_refiner.MotionRefiner.pretrained>`;
         ``"concepts"``: the paper's method, :meth:`Refiner.pretrained(skeleton) <Refiner.pretrained>`.
-    preset : {"mocap", "generator"}, default="mocap"
-        ``method="motion"``'s steps (:data:`~refiner.refinement.motion_refiner.PRESETS`): ``"generator"`` also puts
-        stretched bones back within the lengths real motion gives them (for generators that regress joint positions).
 
     Returns
     -------
@@ -281,16 +278,16 @@ def refine(seq, skeleton: str = "humanact12", *, action=None, mode: str = "full"
         raise ValueError(f"mode={mode!r} belongs to method='concepts'; the default method, 'motion', has one mode, "
                          "'full'.")
     if refiner is None:  # the shipped refiner itself, not a copy (refining changes nothing in it)
-        refiner = (_shared_motion(skeleton, preset) if method == "motion"
+        refiner = (_shared_motion(skeleton) if method == "motion"
                    else _shared_pretrained(Refiner, skeleton, "all", "cpu", {}))
     return refiner.refine(seq, action=action, mode=mode, return_report=return_report)
 
 
-def _shared_motion(skeleton: str, preset: str = "mocap") -> MotionRefiner:
-    """``MotionRefiner.pretrained(skeleton, preset=preset)``, built once per skeleton and preset."""
-    key = ("motion", get_skeleton(skeleton).name, preset)
+def _shared_motion(skeleton: str) -> MotionRefiner:
+    """``MotionRefiner.pretrained(skeleton)``, built once per skeleton."""
+    key = ("motion", get_skeleton(skeleton).name)
     if key not in _PRETRAINED:
-        _PRETRAINED[key] = MotionRefiner.pretrained(skeleton, preset=preset)
+        _PRETRAINED[key] = MotionRefiner.pretrained(skeleton)
     return _PRETRAINED[key]
 
 

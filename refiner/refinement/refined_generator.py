@@ -40,8 +40,8 @@ class RefinedGenerator:
     refiner : object or callable, optional
         An object with ``refine(motion, *, action=None, return_report=False)`` returning a Motion
         (or ``(Motion, report)`` when ``return_report``), or a callable ``(Motion) -> Motion``.
-        Default: ``refiner.refinement.motion_refiner.MotionRefiner.pretrained(skeleton, preset="generator")``
-        (:func:`refiner.refine` with ``preset="generator"``); when that cannot be imported, the identity with a warning.
+        Default: ``refiner.refinement.motion_refiner.MotionRefiner.pretrained(skeleton)``, the default refiner
+        (:func:`refiner.refine`'s ``method="motion"``); when that cannot be imported, the identity with a warning.
     skeleton : str, optional
         Target skeleton, one the adapter produces. Default: the adapter's first.
     adapter_options : mapping, optional
@@ -198,8 +198,8 @@ class RefinedGenerator:
 
 
 def _default_refiner(skeleton: str):
-    """``refiner.refinement.motion_refiner.MotionRefiner.pretrained(skeleton, preset="generator")``, the default
-    refiner for generator output, or the identity with a warning if it cannot be imported."""
+    """``refiner.refinement.motion_refiner.MotionRefiner.pretrained(skeleton)``, the default refiner, or the identity
+    with a warning if it cannot be imported."""
     try:
         # on first use: the refiner brings torch and the networks, which `import refiner` must not load
         from refiner.refinement.motion_refiner import MotionRefiner
@@ -214,9 +214,9 @@ def _default_refiner(skeleton: str):
         )
         return identity_refiner
     try:
-        return pretrained(skeleton, preset="generator")
+        return pretrained(skeleton)
     except ValueError as e:
-        raise ValueError(f"the default refiner MotionRefiner.pretrained({skeleton!r}, preset='generator') failed: {e} Pass refiner=... "
+        raise ValueError(f"the default refiner MotionRefiner.pretrained({skeleton!r}) failed: {e} Pass refiner=... "
                          f"to choose one.") from e
 
 

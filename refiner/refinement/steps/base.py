@@ -10,10 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from refiner.core.contact import contact_joints, foot_joints, heights
+from refiner.core.contact import foot_joints, heights
 from refiner.core.skeletons import get_skeleton
 
-__all__ = ["runs", "dilated", "clip_ground", "WindowFigures", "window_figures", "harms"]
+__all__ = ["runs", "dilated", "WindowFigures", "window_figures", "harms"]
 
 
 def runs(mask) -> list[tuple[int, int]]:
@@ -33,11 +33,6 @@ def dilated(mask, before: int, after: int | None = None) -> np.ndarray:
     for k in range(1, after + 1):
         out[k:] |= m[:-k]
     return out
-
-
-def clip_ground(joints, skeleton) -> float:
-    """The ground of a ``(T, J, 3)`` clip: the lowest height (metres, along the up axis) its contact joints reach."""
-    return float(heights(np.asarray(joints)[:, list(contact_joints(skeleton))], skeleton).min())
 
 
 @dataclass(frozen=True)

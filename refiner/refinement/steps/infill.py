@@ -15,7 +15,8 @@ import numpy as np
 
 from refiner.core.bone_directions import from_bone_directions
 from refiner.refinement.motion_model import ROOT_SCALE, MotionModel, ground_context, motion_features, part_features
-from refiner.refinement.steps.base import clip_ground, dilated, harms, runs, window_figures
+from refiner.refinement.steps.base import dilated, harms, runs, window_figures
+from refiner.core.contact import contact_joints, heights
 
 __all__ = ["InfillConfig", "InfillStep", "flagged_parts", "clip_scores"]
 
@@ -61,11 +62,6 @@ class InfillStep:
 
     def __init__(self, model: MotionModel, config: InfillConfig):
         self.model, self.config = model, config
-
-    @property
-    def skeleton(self) -> str:
-        """The skeleton this step works on: its motion model's."""
-        return self.model.skeleton
 
     def detect(self, clips, actions) -> tuple[np.ndarray, np.ndarray]:
         """``clips (N, T, J, 3)`` -> flaw ``probability (N, T, P)`` and ``flagged (N, T, P)`` bool."""
@@ -119,7 +115,7 @@ class InfillStep:
         changes = []
         for i in range(len(given)):
             entries = []
-            ground = clip_ground(given[i], skel)
+            ground = float(heights(given[i][:, list(contact_joints(skel))], skel).min())
             for s, e in runs(flagged[i].any(1)):
                 before_p, after_p = float(probability[i, s:e].max()), float(after[i, s:e].max())
                 worse = harms(window_figures(given[i], s, e, skel, ground), window_figures(proposed[i], s, e, skel, ground),
