@@ -33,6 +33,9 @@ def test_flags_need_min_run_frames_above_threshold():
     assert np.flatnonzero(flagged[:, 1]).tolist() == list(range(8, 15))
     assert clip_scores(p[None], 2)[0] == pytest.approx(0.9)
     assert clip_scores(p[None, :, :1], 2)[0] == 0.0
+    batch = np.random.default_rng(0).random((3, 20, 3))  # a batch is flagged clip by clip
+    config = InfillConfig(threshold=0.6, min_run=3, margin=1)
+    np.testing.assert_array_equal(flagged_parts(batch, config), np.stack([flagged_parts(b, config) for b in batch]))
 
 
 def test_features_round_trip(rng):

@@ -43,14 +43,19 @@ def clip_scores(probability, min_run: int) -> np.ndarray:
 
 
 def flagged_parts(probability, config: InfillConfig) -> np.ndarray:
-    """``(T, P)`` bool from ``probability (T, P)``: runs of ``min_run`` frames above the threshold, widened by ``margin``."""
+    """``(..., T, P)`` bool from ``probability (..., T, P)``: runs of ``min_run`` frames above the threshold, widened
+    by ``margin``."""
     above = np.asarray(probability) > config.threshold
+    m, n = max(1, config.min_run), above.shape[-2]
+    if n < m:
+        return np.zeros_like(above)
+    full = np.ones(above.shape[:-2] + (n - m + 1, above.shape[-1]), bool)  # the run of m frames starting here is all above
+    for k in range(m):
+        full &= above[..., k:n - m + 1 + k, :]
     keep = np.zeros_like(above)
-    for p in range(above.shape[1]):
-        for s, e in runs(above[:, p]):
-            if e - s >= config.min_run:
-                keep[s:e, p] = True
-    return dilated(keep, config.margin)
+    for k in range(m):
+        keep[..., k:n - m + 1 + k, :] |= full
+    return np.moveaxis(dilated(np.moveaxis(keep, -2, 0), config.margin), 0, -2)
 
 
 class InfillStep:
@@ -66,7 +71,7 @@ class InfillStep:
     def detect(self, clips, actions) -> tuple[np.ndarray, np.ndarray]:
         """``clips (N, T, J, 3)`` -> flaw ``probability (N, T, P)`` and ``flagged (N, T, P)`` bool."""
         _, prob = self.model.scan(clips, actions)
-        flagged = np.stack([flagged_parts(p, self.config) for p in prob])
+        flagged = flagged_parts(prob, self.config)
         flagged[:, 0] = flagged[:, -1] = False  # the first and last frame anchor the in-fill
         return prob, flagged
 
