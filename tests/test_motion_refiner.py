@@ -30,7 +30,7 @@ def test_refined_clips_keep_their_bones_and_unchanged_frames(model, held_out):
         kept = ~r.changed_frames
         np.testing.assert_array_equal(o[kept], f[kept])
         np.testing.assert_allclose(bone_lengths(o, "humanact12"), bone_lengths(f, "humanact12"), atol=1e-4)
-        assert all(c["step"] == model.steps[0].name == "retime" and c["parts"] and c["reason"] for c in r.changes)
+        assert all(c["step"] in {s.name for s in model.steps} and c["parts"] and c["reason"] for c in r.changes)
         assert len(r.flaw_probability) == 60
 
 

@@ -27,6 +27,8 @@ def train_motion_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", type=Path, default=None, help="the dataset's file (default: ../shared/data/...)")
     p.add_argument("--steps", type=int, default=6000, help="training steps per model")
     p.add_argument("--folds", action="store_true", help="also the benchmark's fold models (`bench heldout` needs them)")
+    p.add_argument("--ground-only", action="store_true", help="train nothing: calibrate the support steps' heights on "
+                                                                  "the clean calibration clips into OUT/<dataset>-motion/manifest.json")
     p.add_argument("--jobs", type=int, default=2, help="models trained at once (one thread each; under torchrun: "
                                                        "one model at a time, on every process)")
 
@@ -34,6 +36,8 @@ def train_motion_arguments(p: argparse.ArgumentParser) -> None:
 def train_motion_run(args: argparse.Namespace) -> int:
     if args.jobs < 1 or args.steps < 1:
         raise ValueError("`--jobs` and `--steps` must be at least 1.")
+    if args.ground_only:
+        return _calibrate_ground_into(args)
     runs = args.out / "runs"
     jobs = [("mm_all", [])] + ([("mm_0", ["--fold", "0"]), ("mm_1", ["--fold", "1"])] if args.folds else [])
     if "WORLD_SIZE" in os.environ:  # started by torchrun
@@ -104,7 +108,42 @@ def _build(args: argparse.Namespace, runs: Path) -> int:
     print("thresholds", thresholds, flush=True)
     write_motion_weights(args.out / f"{args.dataset}-motion", models, thresholds, skeleton=ds[0].skeleton,
                          dataset=f"{args.dataset}: {len(learn)} clips", licence=_LICENCES[args.dataset],
+                         support=_support(ds, calibrate),
                          notes={"calibration": f"{len(calibrate)} clean clips of other subjects"})
+    return 0
+
+
+def _support(ds, calibrate) -> dict:
+    """The support steps' heights (``ground``: ``float_m``; ``glide``: ``glide_m``), calibrated on the clean clips
+    ``calibrate`` of ``ds``; no flaw mechanism is involved, so one set serves every model of the weight set. A step
+    the clips do not allow (its height would pass 25 cm) is left out of it."""
+    from refiner.refinement.motion_refiner import CalibrationConfig
+    from refiner.refinement.steps.ground import calibrated_glide, calibrated_ground
+
+    cal, clips = CalibrationConfig(), [ds[i].joints for i in calibrate]
+    heights = {"ground": ("float_m", calibrated_ground(clips, ds[0].skeleton, share=cal.share, window=cal.window)),
+               "glide": ("glide_m", calibrated_glide(clips, ds[0].skeleton, share=cal.share, window=cal.window))}
+    for step, (key, value) in heights.items():
+        print(f"{step}: {key} {value}" + ("" if value else " (the clean clips do not allow it: no such step)"), flush=True)
+    return {step: {key: round(value, 4)} for step, (key, value) in heights.items() if value}
+
+
+def _calibrate_ground_into(args: argparse.Namespace) -> int:
+    """``--ground-only``: write the support steps' calibrated heights into an existing weight set's manifest."""
+    import json
+
+    from refiner.io.datasets import load_dataset
+    from refiner.refinement.training.motion_training import training_split
+
+    path = args.out / f"{args.dataset}-motion" / "manifest.json"
+    if not path.is_file():
+        raise ValueError(f"no weight set at {path.parent}; train one first (without --ground-only).")
+    ds = load_dataset(args.dataset, args.data)
+    manifest = json.loads(path.read_text())
+    for step in ("ground", "glide"):
+        manifest.pop(step, None)
+    manifest.update(_support(ds, training_split(ds)[1]))
+    path.write_text(json.dumps(manifest, indent=1))
     return 0
 
 

@@ -6,7 +6,8 @@ subjects 1-8 and is calibrated on 9-10). Mechanisms written blind (:mod:`refiner
 someone who had not read the refiner) are scored with the default weights, which never saw them either.
 
 Per mechanism: the share of the added error (MPJPE to the clean clip) the refiner removes, and the same for two
-stand-ins on the same flags (linear interpolation of the flagged parts, and leaving the frames as given, which is 0);
+stand-ins on the same flags (the motion model's repair replaced by linear interpolation of the parts it flagged, the
+other steps as they are; and leaving the frames as given, which is 0);
 per family their mean. Clean clips: cm moved and share touched. The record is ``heldout.json``.
 """
 from __future__ import annotations
@@ -47,10 +48,15 @@ def _refine_all(refiner, clips, actions, *, linear: bool = False):
     for n, idx in _by_length(clips).items():
         batch = np.stack([clips[i] for i in idx])
         acts = [actions[i] for i in idx]
-        if linear:
-            step = refiner.steps[0]
-            prob, flagged = step.detect(batch, acts)
-            refined = step.verify(batch, step.propose(batch, acts, flagged, infill=linear_fill), acts, flagged, prob)[0]
+        if linear:  # the steps in order, the motion model's repair replaced by linear in-fill on its flags
+            refined = np.array(batch, dtype=np.float64)
+            for step in refiner.steps:
+                if not hasattr(step, "model"):
+                    refined = step.refine(refined, acts)[0]
+                    continue
+                prob, flagged = step.detect(refined, acts)
+                proposed = step.propose(refined, acts, flagged, infill=linear_fill)
+                refined = step.verify(refined, proposed, acts, flagged, prob)[0]
         else:
             refined = refiner.refine(batch, action=acts)
         for k, i in enumerate(idx):

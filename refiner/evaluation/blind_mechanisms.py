@@ -1,15 +1,20 @@
 """Flaw mechanisms that imitate what 3D human-motion generators get wrong, on HumanAct12 joints.
 
 Each mechanism maps a clean clip ``(T, 24, 3)`` (metres, y down, facing -z) to a flawed copy inside one
-random window of 8-30 frames with smooth edges; both keep every frame's own bone lengths exactly.
+random window of 8-30 frames with smooth edges; the two here keep every frame's own bone lengths exactly.
+``MECHANISMS`` also holds the ground-contact and jitter ones of :mod:`refiner.evaluation.blind_ground_mechanisms`
+(hover, foot skate, sink, jitter; the last two change some bone lengths, as their docstrings say).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from refiner.core.skeletons import get_skeleton
+from refiner.evaluation import blind_ground_mechanisms
+from refiner.evaluation.blind_ground_mechanisms import foot_skate, hover_above_ground, joint_jitter, sink_into_floor
 
-__all__ = ["MECHANISMS", "wrong_limb_pose", "freeze_catch_up"]
+__all__ = ["MECHANISMS", "wrong_limb_pose", "freeze_catch_up", "hover_above_ground", "foot_skate", "sink_into_floor",
+           "joint_jitter"]
 
 _PARENTS = np.array(get_skeleton("humanact12").parents)
 # limb name -> (pivot joint, joints moved with it, torso frame: lateral pair, up pair)
@@ -183,4 +188,5 @@ def freeze_catch_up(clip: np.ndarray, rng: np.random.Generator, severity: float 
     return out.astype(np.float32)
 
 
-MECHANISMS = {"wrong_limb_pose": wrong_limb_pose, "freeze_catch_up": freeze_catch_up}
+MECHANISMS = {"wrong_limb_pose": wrong_limb_pose, "freeze_catch_up": freeze_catch_up,
+              **blind_ground_mechanisms.MECHANISMS}

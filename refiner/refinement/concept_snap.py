@@ -27,7 +27,7 @@ from refiner.concepts.anchors import AnchorConcepts, root_relative
 from refiner.concepts.segmentation import DEFAULT_PENALTY, segment
 from refiner.core.rotations import rotvec_to_rotmat
 from refiner.core.skeletons import get_skeleton
-from refiner.refinement.splicing import project_bone_lengths, reference_lengths
+from refiner.core.splicing import project_bone_lengths, reference_lengths
 
 __all__ = ["snap_to_concepts", "snapped_to_concepts", "check_strength", "check_snap", "facing", "turned"]
 

@@ -20,7 +20,7 @@ Defaults chosen by measurement on held-out HumanAct12 subjects (11-12) with seed
 Each step owns its threshold: the anchor scorer's ``threshold_`` (``AnchorQuality`` or, with
 ``quality="encoder"``, ``AnchorRecognizer``), the transition refiner's ``threshold_`` and the
 re-timing step's per-duration ``thresholds_``; :func:`calibrate` sets the first and the last.
-Only flagged anchors and transitions change (:mod:`refiner.refinement.splicing`), but for the concept-snap option
+Only flagged anchors and transitions change (:mod:`refiner.core.splicing`), but for the concept-snap option
 (``concept_snap``, off by default, :mod:`refiner.refinement.concept_snap`), which runs last and moves every anchor of a
 clip whose action is given.
 """
@@ -31,7 +31,7 @@ import numpy as np
 from refiner.refinement.concept_snap import snapped_to_concepts
 from refiner.refinement.inputs import MIN_FRAMES
 from refiner.refinement.report import RefinementReport, start_reports
-from refiner.refinement.splicing import project_bone_lengths, reference_lengths, splice
+from refiner.core.splicing import project_bone_lengths, reference_lengths, splice
 
 __all__ = ["QUALITY", "ANCHOR_METHODS", "TRANSITION_METHODS", "refine_clips", "calibrate"]
 

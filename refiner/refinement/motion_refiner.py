@@ -1,7 +1,9 @@
 """The default refiner: a declared list of steps around one learned model of motion.
 
-:class:`MotionRefiner` checks the input, runs its declared steps (today one, :class:`~refiner.refinement.steps.retime.RetimeStep`:
-the motion model's recognition, flagged runs re-timed, kept where verified; the model's in-fill and a rigid-bones step
+:class:`MotionRefiner` checks the input, runs its declared steps (:class:`~refiner.refinement.steps.ground.GroundStep`: a body
+floating above its floor without flying lowered onto it; :class:`~refiner.refinement.steps.ground.GlideStep`: a
+body gliding over it with its planted feet slid back; :class:`~refiner.refinement.steps.retime.RetimeStep`: the motion
+model's recognition, flagged runs re-timed; each kept where verified; the model's in-fill and a rigid-bones step
 did not earn their place, ``docs/decisions.md`` D10, D20) and reports each change. Frames no step changed come back
 exactly as given; changed frames keep the clip's own bone lengths. Skeletons without a model of their own (``uestc``,
 ``humanml3d``) are refined through HumanAct12's: converted in, refined, and only the change converted back.
@@ -23,6 +25,7 @@ from refiner.core.validation import check_joints
 from refiner.refinement.inputs import MIN_FRAMES, check_metres, check_metres_each, thread_limits
 from refiner.refinement.motion_model import MotionModel
 from refiner.refinement.report import start_reports
+from refiner.refinement.steps.ground import GlideConfig, GlideStep, GroundConfig, GroundStep
 from refiner.refinement.steps.infill import InfillConfig, clip_scores
 from refiner.refinement.steps.retime import RetimeStep
 
@@ -60,9 +63,10 @@ def calibrated_threshold(model: MotionModel, clips, actions, config: Calibration
 
 def write_motion_weights(folder, models: dict, thresholds: dict, *, skeleton: str, dataset: str, licence: str,
                          split: str = "train", calibration: CalibrationConfig = CalibrationConfig(),
-                         notes: dict | None = None) -> None:
+                         support: dict | None = None, notes: dict | None = None) -> None:
     """Save motion ``models`` (name -> MotionModel; ``"all"`` is the default, ``"fold0"`` / ``"fold1"`` the benchmark's)
-    with their calibrated ``thresholds`` and a ``manifest.json``."""
+    with their calibrated ``thresholds``, the support steps' calibrated heights ``support`` (``{"ground": fields of
+    GroundConfig, "glide": fields of GlideConfig}``, either left out) and a ``manifest.json``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     entries = {}
@@ -72,7 +76,8 @@ def write_motion_weights(folder, models: dict, thresholds: dict, *, skeleton: st
         entries[name] = {"file": path.name, "sha256": file_sha256(path), "threshold": float(thresholds[name]),
                          "mechanisms": model.training_.get("mechanisms", [])}
     manifest = {"kind": "motion_model", "skeleton": skeleton, "dataset": dataset, "split": split, "licence": licence,
-                "models": entries, "calibration_config": asdict(calibration), **(notes or {})}
+                "models": entries, "calibration_config": asdict(calibration), **(support or {}),
+                **(notes or {})}
     (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
 
 
@@ -84,6 +89,8 @@ class MotionRefiner:
     model : MotionModel
     config : InfillConfig
         Its ``threshold`` comes from the weights' manifest (:func:`calibrated_threshold`).
+    ground, glide : GroundConfig, GlideConfig, optional
+        The support steps' options (their heights from the manifest); None leaves a step out.
     skeleton : str, optional
         The clips' skeleton when it differs from the model's (converted through it; ``uestc``, ``humanml3d``).
     threads : int or None, default=1
@@ -92,11 +99,14 @@ class MotionRefiner:
 
     method = "motion"
 
-    def __init__(self, model: MotionModel, config: InfillConfig, *, skeleton: str | None = None, threads: int | None = 1):
+    def __init__(self, model: MotionModel, config: InfillConfig, *, ground: GroundConfig | None = None,
+                 glide: GlideConfig | None = None, skeleton: str | None = None, threads: int | None = 1):
         self.model, self.config, self.threads = model, config, threads
         self.skeleton = get_skeleton(skeleton or model.skeleton).name
         self.action_names = model.action_names
-        self.steps = (RetimeStep(model, config),)
+        support = ((GroundStep(model.skeleton, ground),) if ground is not None else ()) + \
+            ((GlideStep(model.skeleton, glide, judge=model),) if glide is not None else ())
+        self.steps = support + (RetimeStep(model, config),)
 
     @classmethod
     def pretrained(cls, skeleton: str = "humanact12", *, model: str = "all", weights=None, **options) -> "MotionRefiner":
@@ -120,7 +130,9 @@ class MotionRefiner:
                 raise ValueError(f"{path} does not match the sha256 in its manifest; reinstall or retrain it.")
             _CACHE[key] = MotionModel.load(path)
         config = InfillConfig(**{"threshold": entry["threshold"], **options})
-        return cls(_CACHE[key], config, skeleton=name)
+        ground = GroundConfig(**manifest["ground"]) if "ground" in manifest else None
+        glide = GlideConfig(**manifest["glide"]) if "glide" in manifest else None
+        return cls(_CACHE[key], config, ground=ground, glide=glide, skeleton=name)
 
     def refine(self, seq, *, action=None, mode: str | None = None, return_report: bool = False):
         """Refine a Motion, ``(T, J, 3)`` or ``(B, T, J, 3)`` array or tensor; returns the same kind (see
@@ -161,7 +173,7 @@ class MotionRefiner:
         refined = np.array(inner, dtype=np.float64)
         for step in self.steps:
             refined, changes, prob = step.refine(refined, known)
-            for r, p in zip(reports, prob):
+            for r, p in zip(reports, [] if prob is None else prob):
                 r.flaw_probability, r.threshold = p.max(1).round(4).tolist(), self.config.threshold
             for r, entries in zip(reports, changes):
                 r.flagged_frames = sorted(set(r.flagged_frames).union(*(range(e["start"], e["stop"]) for e in entries)))
@@ -181,7 +193,9 @@ class MotionRefiner:
         return out, reports
 
 
-_HOW = {"infill": "in-filled from context by the motion model", "retime": "re-timed along its own path at an even pace"}
+_HOW = {"infill": "in-filled from context by the motion model", "retime": "re-timed along its own path at an even pace",
+        "ground": "lowered along the vertical onto the clip's floor",
+        "glide": "slid back along the floor so the planted feet stay"}
 
 
 def _why_not(entry: dict) -> str:
@@ -192,8 +206,13 @@ def _change(entry: dict, model: MotionModel) -> dict:
     """A step's run as a report entry: frames, parts in words, whether it was kept, and why."""
     skel = get_skeleton(model.skeleton)
     names = [skel.joint_names[skel.bones[p, 1]] if p < len(skel.bones) else "root" for p in entry["parts"]]
-    before, after = entry["flaw_probability"]
     how = _HOW.get(entry["step"], entry["step"])
-    reason = f"flaw probability {before:.2f} -> {after:.2f}; {how}"
+    if "flaw_probability" in entry:
+        before, after = entry["flaw_probability"]
+        reason = f"flaw probability {before:.2f} -> {after:.2f}; {how}"
+    elif entry["step"] == "glide":
+        reason = f"body and planted feet slide {entry['gap_cm']:.1f} cm over the floor; {how}"
+    else:
+        reason = f"body floats {entry['gap_cm']:.1f} cm above its floor, not in flight; {how}"
     return {"step": entry["step"], "start": entry["start"], "stop": entry["stop"], "parts": names, "kept": entry["kept"],
             "reason": reason if entry["kept"] else f"{reason}, not kept: {_why_not(entry)}"}

@@ -4,7 +4,7 @@
 and in-fills them, :class:`~refiner.refinement.motion_refiner.MotionRefiner`) or ``"concepts"`` (the paper's: anchor
 scores and transition residuals, its variants as options, :mod:`refiner.refinement.concepts_pipeline`), whose parts
 :class:`Refiner` holds. Do no harm: only flagged frames change, spliced in without jumps and put back on the input's
-bone lengths (:mod:`refiner.refinement.splicing`); the concepts method's concept-snap option (off by default) is the
+bone lengths (:mod:`refiner.core.splicing`); the concepts method's concept-snap option (off by default) is the
 one step that moves a whole clip.
 """
 from __future__ import annotations
@@ -32,7 +32,7 @@ from refiner.refinement.inputs import (METHODS, MODES, auto_threads, check_choic
                                        check_metres_each, check_threads, thread_limits)
 from refiner.refinement.motion_refiner import MotionRefiner
 from refiner.refinement.report import RefinementReport
-from refiner.refinement.splicing import project_bone_lengths, splice
+from refiner.core.splicing import project_bone_lengths, splice
 from refiner.refinement.transition_refinement import TransitionRefiner, TransitionRetimer
 
 __all__ = ["Refiner", "RefinementReport", "refine", "MODES", "METHODS", "splice", "project_bone_lengths"]
