@@ -13,7 +13,8 @@ import numpy as np
 from refiner.core.contact import contact_joints, heights
 from refiner.core.skeletons import get_skeleton
 
-__all__ = ["floor_plane", "floor_gap", "plane_height", "levelled", "lowest_contact", "support_heights", "plane_basis"]
+__all__ = ["floor_plane", "floor_gap", "plane_height", "levelled", "lowest_contact", "support_heights", "support_joints",
+           "plane_basis"]
 
 
 def lowest_contact(joints, skeleton) -> tuple[np.ndarray, np.ndarray]:
@@ -25,11 +26,15 @@ def lowest_contact(joints, skeleton) -> tuple[np.ndarray, np.ndarray]:
     return np.take_along_axis(points, k[..., None, None], -2)[..., 0, :], np.take_along_axis(h, k[..., None], -1)[..., 0]
 
 
-def support_heights(joints, skeleton) -> np.ndarray:
-    """``(..., T, K)`` metres: heights of the root and of the head (or neck), the body a limb does not carry."""
+def support_joints(skeleton) -> list[int]:
+    """The root and the head (or neck): the body a limb does not carry, which moves when the whole body does."""
     skel = get_skeleton(skeleton)
-    top = [skel.index(n) for n in ("head", "neck") if n in skel.joint_names][:1]
-    return heights(joints[..., [skel.root] + top, :], skel)
+    return [skel.root] + [skel.index(n) for n in ("head", "neck") if n in skel.joint_names][:1]
+
+
+def support_heights(joints, skeleton) -> np.ndarray:
+    """``(..., T, K)`` metres: heights of the :func:`support_joints`."""
+    return heights(joints[..., support_joints(skeleton), :], skeleton)
 
 
 def plane_basis(skeleton) -> np.ndarray:

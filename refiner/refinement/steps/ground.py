@@ -20,12 +20,13 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, median_filter
 
 from refiner.core.contact import contact_joints, foot_joints, heights
-from refiner.core.floor import floor_gap, floor_plane, levelled, plane_basis, plane_height, support_heights
+from refiner.core.floor import (floor_gap, floor_plane, levelled, plane_basis, plane_height, support_heights,
+                                support_joints)
 from refiner.core.skeletons import get_skeleton
 from refiner.refinement.steps.base import harms, runs, window_figures
 
-__all__ = ["GroundConfig", "GroundStep", "grown_runs", "float_runs", "calibrated_ground", "GlideConfig", "GlideStep", "glide_offset",
-           "glide_runs", "calibrated_glide"]
+__all__ = ["GroundConfig", "GroundStep", "grown_runs", "float_runs", "calibrated_ground", "GlideConfig", "GlideStep",
+           "glide_offset", "glide_runs", "calibrated_glide"]
 
 _G = 9.81  # m/s²
 
@@ -34,11 +35,12 @@ _G = 9.81  # m/s²
 class GroundConfig:
     """Options of :class:`GroundStep`. ``float_m``: the calibrated height above the floor that flags a run (the
     manifest's), never calibrated under ``least_float_m`` (twice the floor's ``bandwidth_m``: below it the fit of a
-    flawed clip's floor moves by as much, ``docs/decisions.md`` D24); ``min_run`` frames; a run grows out while its smoothed gap stays beyond
-    ``edge_share`` of its threshold; ``smooth_frames``: the Gaussian that smooths the gap into the
-    body's offset (what is repaired); an airborne run whose root decelerates by ``flight_share`` of gravity is a jump and is left alone, and so is a run whose root and feet do not follow its gap with a slope of
-    ``follow_share`` (a limb or a crouch, not a body moved);
-    ``bandwidth_m`` is how far off the floor a frame still pulls the plane fit; ``jerk_share`` as in verification."""
+    flawed clip's floor moves by as much, ``docs/decisions.md`` D24); ``min_run`` frames; a run grows out while its
+    smoothed gap stays beyond ``edge_share`` of its threshold; ``smooth_frames``: the Gaussian that smooths the gap
+    into the body's offset (what is repaired); an airborne run whose root decelerates by ``flight_share`` of gravity
+    is a jump and is left alone, and so is a run whose root and head do not follow its gap with a slope of
+    ``follow_share`` (a limb or a crouch, not a body moved); ``bandwidth_m`` is how far off the floor a frame still
+    pulls the plane fit; ``jerk_share`` as in verification."""
 
     float_m: float = 0.05
     least_float_m: float = 0.04
@@ -49,6 +51,13 @@ class GroundConfig:
     follow_share: float = 0.5
     bandwidth_m: float = 0.02
     jerk_share: float = 0.05
+
+
+def _departure(v, s: int, e: int) -> np.ndarray:
+    """``v[s:e]`` less the straight course between the frames that bound the run, ``v[s - 1]`` and ``v[e]``."""
+    v = np.asarray(v, np.float64)
+    share = (np.arange(1, e - s + 1) / (e - s + 1)).reshape((-1,) + (1,) * (v.ndim - 1))
+    return v[s:e] - (v[s - 1] + (v[e] - v[s - 1]) * share)
 
 
 def _is_flight(root_height, peak_m: float, fps: float, share: float) -> bool:
@@ -103,21 +112,16 @@ def _body_moved(gap, rest, s: int, e: int, share: float) -> bool:
     the gap's departure from its course between the bounding frames with a slope of ``share`` or more each, and the
     root's height above the lowest joint departs by under ``share`` of it (a limb off or through the floor moves the
     lowest joint alone, a crouch or a tuck changes the legs' reach; a body raised or lowered moves them all)."""
-    def departure(v):
-        v = np.asarray(v, np.float64)
-        line = v[s - 1] + (v[e] - v[s - 1]) * ((np.arange(s, e) - s + 1) / (e - s + 1))[:, None] if v.ndim > 1 else \
-            np.interp(np.arange(s, e), [s - 1, e], [v[s - 1], v[e]])
-        return v[s:e] - line
-    d = departure(gap)
-    slopes = departure(rest).T @ d / max(float(d @ d), 1e-12)
-    reach = np.abs(departure(np.asarray(rest)[:, 0] - gap)).max()  # the root's height above the lowest joint
+    d = _departure(gap, s, e)
+    slopes = _departure(rest, s, e).T @ d / max(float(d @ d), 1e-12)
+    reach = np.abs(_departure(np.asarray(rest)[:, 0] - gap, s, e)).max()  # the root's height above the lowest joint
     return bool(slopes.min() >= share and reach < share * np.abs(d).max())
 
 
 def smoothed_gap(gap, config: GroundConfig) -> np.ndarray:
-    """``gap (T,)`` low-passed (Gaussian of ``smooth_frames``): the body's offset from its floor, without the
+    """``gap (..., T)`` low-passed along time (Gaussian of ``smooth_frames``): the body's offset from its floor, without the
     frame-to-frame switching of which foot joint is lowest."""
-    return gaussian_filter1d(np.asarray(gap, np.float64), config.smooth_frames, mode="nearest")
+    return gaussian_filter1d(np.asarray(gap, np.float64), config.smooth_frames, axis=-1, mode="nearest")
 
 
 class GroundStep:
@@ -135,7 +139,7 @@ class GroundStep:
         skel, c = get_skeleton(self.skeleton), self.config
         plane = floor_plane(clips, skel, bandwidth_m=c.bandwidth_m)
         gap = floor_gap(clips, skel, plane)
-        high = (gaussian_filter1d(gap, c.smooth_frames, axis=-1, mode="nearest") > c.float_m).any(-1)
+        high = (smoothed_gap(gap, c) > c.float_m).any(-1)
         found = [float_runs(g, support_heights(x, skel), skel.fps, c.float_m, c) if h else []
                  for x, g, h in zip(clips, gap, high)]
         return plane, gap, found
@@ -147,8 +151,7 @@ class GroundStep:
         up = get_skeleton(self.skeleton).up_vector
         offset = smoothed_gap(gap, self.config)
         for s, e in found:
-            d = offset[s:e] - np.interp(np.arange(s, e), [s - 1, e], [offset[s - 1], offset[e]])
-            out[s:e] -= np.clip(d, 0, None)[:, None, None] * up
+            out[s:e] -= np.clip(_departure(offset, s, e), 0, None)[:, None, None] * up
         return out
 
     def refine(self, clips, actions=None) -> tuple[np.ndarray, list[list[dict]], None]:
@@ -265,13 +268,6 @@ def glide_runs(offset, glide_m: float, config: GlideConfig) -> list[tuple[int, i
     return _merged(grown_runs(np.linalg.norm(offset, axis=-1), glide_m, config.min_run, config.edge_share))
 
 
-def _departure(v, s: int, e: int) -> np.ndarray:
-    """``v[s:e]`` less the straight course between the frames that bound the run, ``v[s - 1]`` and ``v[e]``."""
-    v = np.asarray(v, np.float64)
-    share = (np.arange(1, e - s + 1) / (e - s + 1)).reshape((-1,) + (1,) * (v.ndim - 1))
-    return v[s:e] - (v[s - 1] + (v[e] - v[s - 1]) * share)
-
-
 class GlideStep:
     """Gliding: a body whose planted feet slide with it over the floor, slid back (detect / propose / verify / report).
 
@@ -293,8 +289,7 @@ class GlideStep:
         out, changes, root = np.array(clips, dtype=np.float64), [[] for _ in clips], len(skel.bones)
         actions = [None] * len(out) if actions is None else list(actions)
         offsets = glide_offset(out, skel, c)
-        top = [skel.index(n) for n in ("head", "neck") if n in skel.joint_names][:1]
-        support, proposed = [skel.root] + top, {}
+        support, proposed = support_joints(skel), {}
         for i in np.flatnonzero((np.linalg.norm(offsets, axis=-1) > c.glide_m).any(-1)):
             offset, carried = offsets[i], out[i][:, support] @ plane_basis(skel).T  # (T, K, 2): root and head
             lowest = float(heights(out[i][:, list(contact_joints(skel))], skel).min())
