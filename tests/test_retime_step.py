@@ -1,11 +1,11 @@
 """Re-timing a flagged run at an even pace: a stalled stretch of a steady walk comes back steady, frames outside the
-run and every frame's bone lengths stay as given."""
+run and every frame's bone lengths stay as given; a run grows over the frozen frames next to it, and only over them."""
 from __future__ import annotations
 
 import numpy as np
 
 from refiner.core.bone_directions import retimed, to_bone_directions
-from refiner.refinement.steps.retime import even_pace
+from refiner.refinement.steps.retime import calibrated_stillness, even_pace, pace, still_grown
 
 
 def _steady(tiny_clip, n=40, speed=0.03):
@@ -44,3 +44,70 @@ def test_a_still_run_is_left_as_given(tiny_clip):
     frames = np.zeros(12, bool)
     frames[3:8] = True
     np.testing.assert_array_equal(even_pace(still, frames, "humanact12"), still)
+
+
+def _frozen(tiny_clip):
+    """A steady clip frozen on frame 10 until frame 20, where it jumps to where the motion is."""
+    clean = _steady(tiny_clip)
+    frozen = clean.copy()
+    frozen[10:20] = clean[10]
+    return clean, frozen
+
+
+def test_a_run_grows_over_the_frozen_frames_next_to_it_and_no_further(tiny_clip):
+    clean, frozen = _frozen(tiny_clip)
+    seed = np.zeros(len(frozen), bool)
+    seed[17:22] = True  # a detector that saw the end of the freeze and the jump
+    grown = still_grown(frozen, seed, still_m=0.003)
+    assert np.flatnonzero(grown).tolist() == list(range(11, 22))  # frames 11-19 did not move; 10 and 22 did
+    np.testing.assert_allclose(even_pace(frozen, grown, "humanact12"), clean, atol=1e-6)
+    assert np.abs(even_pace(frozen, seed, "humanact12") - clean).max() > 0.05  # the seed alone leaves the freeze
+    np.testing.assert_array_equal(still_grown(frozen, seed, still_m=0.0), seed)
+    batch = still_grown(np.stack([frozen, clean]), np.stack([seed, seed]), still_m=0.003)
+    np.testing.assert_array_equal(batch, np.stack([grown, seed]))
+
+
+def test_pace_is_the_mean_joint_step(tiny_clip):
+    clean = _steady(tiny_clip, speed=0.02)
+    p = pace(clean)
+    assert p.shape == (len(clean),) and np.isinf(p[0])
+    np.testing.assert_allclose(p[1:], 0.02)
+
+
+def test_real_capture_is_never_frozen(humanact12):
+    clips = [m.joints for m in humanact12.split("train")][:200]
+    still_m = calibrated_stillness(clips, share=0.01)
+    assert 0.0005 < still_m < 0.01  # capture noise keeps a standing body moving by millimetres a frame
+    frames = np.concatenate([pace(c)[1:] for c in clips])
+    assert abs(np.mean(frames < still_m) - 0.01) < 0.002
+    assert calibrated_stillness(clips, share=0.1) > still_m
+
+
+def test_the_shipped_refiner_grows_its_re_timing_runs():
+    from refiner.refinement.motion_refiner import MotionRefiner
+
+    refiner = MotionRefiner.pretrained("humanact12")
+    assert 0.0005 < refiner.config.still_m < 0.01
+    assert MotionRefiner.pretrained("humanact12", still_m=0.0).config.still_m == 0.0
+
+
+def test_the_step_flags_the_grown_frames_for_every_part(tiny_clip):
+    from refiner.refinement.steps.infill import InfillConfig
+    from refiner.refinement.steps.retime import RetimeStep
+
+    clean, frozen = _frozen(tiny_clip)
+
+    class Seeded:  # a detector sure of frames 18-20 of the first bone only
+        skeleton = "humanact12"
+
+        def scan(self, clips, actions):
+            p = np.zeros(np.shape(clips)[:2] + (24,))
+            p[:, 18:21, 0] = 1.0
+            return None, p
+
+    step = RetimeStep(Seeded(), InfillConfig(threshold=0.5, margin=1, still_m=0.003))
+    _, flagged = step.detect(frozen[None], [None])
+    assert np.flatnonzero(flagged[0].any(1)).tolist() == list(range(11, 22))
+    assert flagged[0, 11:17].all() and not flagged[0, 17:22, 1:].any()  # seeded frames keep their own parts
+    _, seeded = RetimeStep(Seeded(), InfillConfig(threshold=0.5, margin=1)).detect(frozen[None], [None])
+    assert np.flatnonzero(seeded[0].any(1)).tolist() == list(range(17, 22))

@@ -27,8 +27,9 @@ def train_motion_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", type=Path, default=None, help="the dataset's file (default: ../shared/data/...)")
     p.add_argument("--steps", type=int, default=6000, help="training steps per model")
     p.add_argument("--folds", action="store_true", help="also the benchmark's fold models (`bench heldout` needs them)")
-    p.add_argument("--ground-only", action="store_true", help="train nothing: calibrate the support steps' heights on "
-                                                                  "the clean calibration clips into OUT/<dataset>-motion/manifest.json")
+    p.add_argument("--ground-only", action="store_true", help="train nothing: calibrate the support steps' heights and "
+                                                                  "the re-timing's stillness on the clean calibration clips into "
+                                                                  "OUT/<dataset>-motion/manifest.json")
     p.add_argument("--jobs", type=int, default=2, help="models trained at once (one thread each; under torchrun: "
                                                        "one model at a time, on every process)")
 
@@ -114,22 +115,28 @@ def _build(args: argparse.Namespace, runs: Path) -> int:
 
 
 def _support(ds, calibrate) -> dict:
-    """The support steps' heights (``ground``: ``float_m``; ``glide``: ``glide_m``), calibrated on the clean clips
-    ``calibrate`` of ``ds``; no flaw mechanism is involved, so one set serves every model of the weight set. A step
-    the clips do not allow (its height would pass 25 cm) is left out of it."""
+    """The support steps' heights (``ground``: ``float_m``; ``glide``: ``glide_m``) and the re-timing's stillness
+    (``retime``: ``still_m``), calibrated on the clean clips ``calibrate`` of ``ds``; no flaw mechanism is involved,
+    so one set serves every model of the weight set. A support step the clips do not allow (its height would pass
+    25 cm) is left out of it."""
     from refiner.refinement.motion_refiner import CalibrationConfig
     from refiner.refinement.steps.ground import calibrated_glide, calibrated_ground
+    from refiner.refinement.steps.retime import calibrated_stillness
 
     cal, clips = CalibrationConfig(), [ds[i].joints for i in calibrate]
     heights = {"ground": ("float_m", calibrated_ground(clips, ds[0].skeleton, share=cal.share, window=cal.window)),
                "glide": ("glide_m", calibrated_glide(clips, ds[0].skeleton, share=cal.share, window=cal.window))}
     for step, (key, value) in heights.items():
         print(f"{step}: {key} {value}" + ("" if value else " (the clean clips do not allow it: no such step)"), flush=True)
-    return {step: {key: round(value, 4)} for step, (key, value) in heights.items() if value}
+    still_m = calibrated_stillness(clips, share=cal.still_share)
+    print(f"retime: still_m {still_m}", flush=True)
+    return {**{step: {key: round(value, 4)} for step, (key, value) in heights.items() if value},
+            "retime": {"still_m": round(still_m, 5)}}
 
 
 def _calibrate_ground_into(args: argparse.Namespace) -> int:
-    """``--ground-only``: write the support steps' calibrated heights into an existing weight set's manifest."""
+    """``--ground-only``: write the support steps' calibrated heights and the re-timing's stillness into an existing
+    weight set's manifest."""
     import json
 
     from refiner.io.datasets import load_dataset
@@ -140,7 +147,7 @@ def _calibrate_ground_into(args: argparse.Namespace) -> int:
         raise ValueError(f"no weight set at {path.parent}; train one first (without --ground-only).")
     ds = load_dataset(args.dataset, args.data)
     manifest = json.loads(path.read_text())
-    for step in ("ground", "glide"):
+    for step in ("ground", "glide", "retime"):
         manifest.pop(step, None)
     manifest.update(_support(ds, training_split(ds)[1]))
     path.write_text(json.dumps(manifest, indent=1))

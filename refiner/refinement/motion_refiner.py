@@ -41,11 +41,13 @@ _CACHE: dict = {}
 @dataclass(frozen=True)
 class CalibrationConfig:
     """How a motion model's threshold is calibrated on clean clips it never saw: the share of ``window``-frame pieces
-    (a generator's usual clip, 3 s at 20 fps) the detector may flag; ``min_run`` as in :class:`InfillConfig`."""
+    (a generator's usual clip, 3 s at 20 fps) the detector may flag; ``min_run`` as in :class:`InfillConfig`;
+    ``still_share``: the share of clean frames stiller than the re-timing's ``still_m``."""
 
     share: float = 0.03
     window: int = 60
     min_run: int = 2
+    still_share: float = 0.01
 
 
 def calibrated_threshold(model: MotionModel, clips, actions, config: CalibrationConfig = CalibrationConfig()) -> float:
@@ -129,7 +131,7 @@ class MotionRefiner:
             if file_sha256(path) != entry["sha256"]:
                 raise ValueError(f"{path} does not match the sha256 in its manifest; reinstall or retrain it.")
             _CACHE[key] = MotionModel.load(path)
-        config = InfillConfig(**{"threshold": entry["threshold"], **options})
+        config = InfillConfig(**{"threshold": entry["threshold"], **manifest.get("retime", {}), **options})
         ground = GroundConfig(**manifest["ground"]) if "ground" in manifest else None
         glide = GlideConfig(**manifest["glide"]) if "glide" in manifest else None
         return cls(_CACHE[key], config, ground=ground, glide=glide, skeleton=name)

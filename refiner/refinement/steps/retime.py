@@ -5,6 +5,8 @@ Generators stall, skip ahead and catch up: the poses are right and their timing 
 are the motion model's (:class:`~refiner.refinement.steps.infill.InfillStep`); ``propose`` re-samples the frames of
 each flagged run, between the kept frames that bound it, at even steps of the body's path length (mean joint
 displacement); every frame keeps its own bone lengths. Chosen over the in-fill on the calibration subjects (``docs/decisions.md`` D20).
+A flagged run first grows over the frames next to it in which the body stands stiller than real capture does
+(``still_m``, calibrated on clean clips): a freeze is where the lost time went, so it belongs to the run (D27).
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from refiner.core.skeletons import get_skeleton
 from refiner.refinement.steps.base import runs
 from refiner.refinement.steps.infill import InfillStep
 
-__all__ = ["RetimeStep", "even_pace"]
+__all__ = ["RetimeStep", "even_pace", "pace", "still_grown", "calibrated_stillness"]
 
 
 def even_pace(joints, frames, skeleton) -> np.ndarray:
@@ -38,11 +40,51 @@ def even_pace(joints, frames, skeleton) -> np.ndarray:
     return out
 
 
+def pace(joints) -> np.ndarray:
+    """``joints (..., T, J, 3)`` metres -> ``(..., T)`` metres per frame: the mean joint displacement from the frame
+    before (frame 0: infinite, it has none)."""
+    x = np.asarray(joints, dtype=np.float64)
+    step = np.linalg.norm(np.diff(x, axis=-3), axis=-1).mean(-1)
+    return np.concatenate([np.full(step.shape[:-1] + (1,), np.inf), step], -1)
+
+
+def still_grown(joints, frames, still_m: float) -> np.ndarray:
+    """``frames (..., T)`` bool with every run grown back and forward over the frames next to it whose :func:`pace`
+    is below ``still_m`` (the body stands stiller than that); growth stops short of the first and last frame."""
+    f = np.asarray(frames, bool)
+    p = pace(joints)
+    out = f.copy()
+    for idx in np.ndindex(f.shape[:-1]):
+        n, still = f.shape[-1], p[idx] < still_m
+        for s, e in runs(f[idx]):
+            while s > 1 and still[s - 1]:
+                s -= 1
+            while e < n - 1 and still[e]:
+                e += 1
+            out[idx][s:e] = True
+    return out
+
+
+def calibrated_stillness(clips, *, share: float = 0.01) -> float:
+    """``still_m``: the pace (metres per frame) that only ``share`` of the frames of the clean ``clips ((T, J, 3)
+    metres each, real, unseen by the model)`` stay below: real capture never stands stiller than that."""
+    return float(np.quantile(np.concatenate([pace(c)[1:] for c in clips]), share))
+
+
 class RetimeStep(InfillStep):
     """The motion model's detect / verify around :func:`even_pace` (see the module docstring)."""
 
     name = "retime"
     moves_whole_body = True
+
+    def detect(self, clips, actions) -> tuple[np.ndarray, np.ndarray]:
+        """The motion model's flags (:meth:`InfillStep.detect`), each run grown over the still frames next to it
+        (:func:`still_grown`, where ``still_m`` is set); grown frames are flagged for every part."""
+        prob, flagged = super().detect(clips, actions)
+        if self.config.still_m > 0 and flagged.any():
+            grown = still_grown(clips, flagged.any(-1), self.config.still_m)
+            flagged |= (grown & ~flagged.any(-1))[..., None]
+        return prob, flagged
 
     def propose(self, clips, actions, flagged, infill=None) -> np.ndarray:
         """The clips with each run of flagged frames (any part) re-timed by :func:`even_pace`; ``infill``, given, makes
