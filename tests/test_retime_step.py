@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from refiner.core.bone_directions import retimed, to_bone_directions
-from refiner.refinement.steps.retime import calibrated_stillness, even_pace, pace, still_grown
+from refiner.refinement.steps.retime import calibrated_stillness, caught_up_freezes, even_pace, pace, still_grown
 
 
 def _steady(tiny_clip, n=40, speed=0.03):
@@ -111,3 +111,19 @@ def test_the_step_flags_the_grown_frames_for_every_part(tiny_clip):
     assert flagged[0, 11:17].all() and not flagged[0, 17:22, 1:].any()  # seeded frames keep their own parts
     _, seeded = RetimeStep(Seeded(), InfillConfig(threshold=0.5, margin=1)).detect(frozen[None], [None])
     assert np.flatnonzero(seeded[0].any(1)).tolist() == list(range(17, 22))
+
+
+def test_a_freeze_is_found_where_a_jump_catches_it_up(tiny_clip):
+    clean, frozen = _frozen(tiny_clip)  # frozen over 11-19, the jump at 20
+    np.testing.assert_array_equal(np.flatnonzero(caught_up_freezes(frozen, 0.003)), np.arange(11, 21))
+    skipped = clean.copy()  # a skip: 6 frames ahead at frame 10, then a wait until the clip catches up at 26
+    skipped[10:26] = clean[np.minimum(np.arange(10, 26) + 6, 26)]
+    found = caught_up_freezes(skipped, 0.003)
+    np.testing.assert_array_equal(np.flatnonzero(found), np.arange(10, 27))  # frame 26 is the wait's last
+    np.testing.assert_allclose(even_pace(skipped, found, "humanact12"), clean, atol=1e-6)
+    waited = clean.copy()  # a body that stops and then goes on at its pace has lost no time: no jump, no freeze
+    waited[10:20] = clean[10]
+    waited[20:] = clean[11:len(clean) - 9]
+    assert not caught_up_freezes(waited, 0.003).any()
+    assert not caught_up_freezes(clean, 0.003).any()
+    np.testing.assert_array_equal(caught_up_freezes(np.stack([frozen, clean]), 0.003)[1], np.zeros(len(clean), bool))

@@ -6,7 +6,8 @@ are the motion model's (:class:`~refiner.refinement.steps.infill.InfillStep`); `
 each flagged run, between the kept frames that bound it, at even steps of the body's path length (mean joint
 displacement); every frame keeps its own bone lengths. Chosen over the in-fill on the calibration subjects (``docs/decisions.md`` D20).
 A flagged run first grows over the frames next to it in which the body stands stiller than real capture does
-(``still_m``, calibrated on clean clips): a freeze is where the lost time went, so it belongs to the run (D27).
+(``still_m``, calibrated on clean clips): a freeze is where the lost time went, so it belongs to the run (D27). A
+freeze the detector missed is flagged too where a jump near it makes up the time it lost (:func:`caught_up_freezes`, D29).
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from refiner.core.skeletons import get_skeleton
 from refiner.refinement.steps.base import runs
 from refiner.refinement.steps.infill import InfillStep
 
-__all__ = ["RetimeStep", "even_pace", "pace", "still_grown", "calibrated_stillness"]
+__all__ = ["RetimeStep", "even_pace", "pace", "still_grown", "caught_up_freezes", "calibrated_stillness"]
 
 
 def even_pace(joints, frames, skeleton) -> np.ndarray:
@@ -65,6 +66,30 @@ def still_grown(joints, frames, still_m: float) -> np.ndarray:
     return out
 
 
+def caught_up_freezes(joints, still_m: float, min_run: int = 2) -> np.ndarray:
+    """``joints (..., T, J, 3)`` -> ``(..., T)`` bool: each run of ``min_run`` or more frames stiller than ``still_m``
+    (see :func:`still_grown`) that a jump near it catches up, with the frames between them. The jump is the fastest
+    frame within twice the freeze's length of it; its step beyond the faster of the steps beside it must cover at least
+    half the path the body would have travelled during the freeze at its usual pace (the median pace of the moving
+    frames that near), as a body that froze and then caught up does; the first and last frame stay out."""
+    x = np.asarray(joints, dtype=np.float64)
+    p = pace(x)
+    out = np.zeros(p.shape, bool)
+    for idx in np.ndindex(p.shape[:-1]):
+        q, n_frames = p[idx], p.shape[-1]
+        for a, b in runs(q < still_m):
+            n = b - a
+            near = np.r_[max(1, a - 2 * n - 1):a, b:min(n_frames, b + 2 * n + 1)]
+            moving = q[near][q[near] >= still_m]
+            if n < min_run or not len(moving):
+                continue
+            jump = int(near[np.argmax(q[near])])
+            beside = q[[t for t in (jump - 1, jump + 1) if 1 <= t < n_frames]].max()
+            if q[jump] - beside >= np.median(moving) * n / 2:  # a jump, not the top of a ramp
+                out[idx][max(1, min(jump, a)):min(n_frames - 1, max(jump, b - 1) + 1)] = True
+    return out
+
+
 def calibrated_stillness(clips, *, share: float = 0.01) -> float:
     """``still_m``: the pace (metres per frame) that only ``share`` of the frames of the clean ``clips ((T, J, 3)
     metres each, real, unseen by the model)`` stay below: real capture never stands stiller than that."""
@@ -78,11 +103,13 @@ class RetimeStep(InfillStep):
     moves_whole_body = True
 
     def detect(self, clips, actions) -> tuple[np.ndarray, np.ndarray]:
-        """The motion model's flags (:meth:`InfillStep.detect`), each run grown over the still frames next to it
-        (:func:`still_grown`, where ``still_m`` is set); grown frames are flagged for every part."""
+        """The motion model's flags (:meth:`InfillStep.detect`) and, where ``still_m`` is set, the
+        :func:`caught_up_freezes`, each run grown over the still frames next to it (:func:`still_grown`); frames the
+        model did not flag are flagged for every part."""
         prob, flagged = super().detect(clips, actions)
-        if self.config.still_m > 0 and flagged.any():
-            grown = still_grown(clips, flagged.any(-1), self.config.still_m)
+        if self.config.still_m > 0:
+            seeds = flagged.any(-1) | caught_up_freezes(clips, self.config.still_m, self.config.min_run)
+            grown = still_grown(clips, seeds, self.config.still_m)
             flagged |= (grown & ~flagged.any(-1))[..., None]
         return prob, flagged
 
