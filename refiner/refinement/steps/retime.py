@@ -45,7 +45,8 @@ def pace(joints) -> np.ndarray:
     """``joints (..., T, J, 3)`` metres -> ``(..., T)`` metres per frame: the mean joint displacement from the frame
     before (frame 0: infinite, it has none)."""
     x = np.asarray(joints, dtype=np.float64)
-    step = np.linalg.norm(np.diff(x, axis=-3), axis=-1).mean(-1)
+    d = np.diff(x, axis=-3)
+    step = np.sqrt(np.einsum("...i,...i->...", d, d)).mean(-1)
     return np.concatenate([np.full(step.shape[:-1] + (1,), np.inf), step], -1)
 
 
@@ -53,17 +54,18 @@ def still_grown(joints, frames, still_m: float) -> np.ndarray:
     """``frames (..., T)`` bool with every run grown back and forward over the frames next to it whose :func:`pace`
     is below ``still_m`` (the body stands stiller than that); growth stops short of the first and last frame."""
     f = np.asarray(frames, bool)
-    p = pace(joints)
-    out = f.copy()
-    for idx in np.ndindex(f.shape[:-1]):
-        n, still = f.shape[-1], p[idx] < still_m
-        for s, e in runs(f[idx]):
+    p = pace(joints).reshape(-1, f.shape[-1])
+    out = f.reshape(-1, f.shape[-1]).copy()
+    n = out.shape[-1]
+    for i in np.flatnonzero(out.any(-1)):
+        still = p[i] < still_m
+        for s, e in runs(f.reshape(out.shape)[i]):
             while s > 1 and still[s - 1]:
                 s -= 1
             while e < n - 1 and still[e]:
                 e += 1
-            out[idx][s:e] = True
-    return out
+            out[i, s:e] = True
+    return out.reshape(f.shape)
 
 
 def caught_up_freezes(joints, still_m: float, min_run: int = 2) -> np.ndarray:
@@ -73,11 +75,13 @@ def caught_up_freezes(joints, still_m: float, min_run: int = 2) -> np.ndarray:
     half the path the body would have travelled during the freeze at its usual pace (the median pace of the moving
     frames that near), as a body that froze and then caught up does; the first and last frame stay out."""
     x = np.asarray(joints, dtype=np.float64)
-    p = pace(x)
-    out = np.zeros(p.shape, bool)
-    for idx in np.ndindex(p.shape[:-1]):
-        q, n_frames = p[idx], p.shape[-1]
-        for a, b in runs(q < still_m):
+    p = pace(x).reshape(-1, x.shape[-3])
+    out, still = np.zeros(p.shape, bool), p < still_m
+    n_frames = p.shape[-1]
+    paired = still[:, 1:] & still[:, :-1] if min_run > 1 else still
+    for i in np.flatnonzero(paired.any(-1)):  # most clips have no freeze to look at
+        q = p[i]
+        for a, b in runs(still[i]):
             n = b - a
             near = np.r_[max(1, a - 2 * n - 1):a, b:min(n_frames, b + 2 * n + 1)]
             moving = q[near][q[near] >= still_m]
@@ -86,8 +90,8 @@ def caught_up_freezes(joints, still_m: float, min_run: int = 2) -> np.ndarray:
             jump = int(near[np.argmax(q[near])])
             beside = q[[t for t in (jump - 1, jump + 1) if 1 <= t < n_frames]].max()
             if q[jump] - beside >= np.median(moving) * n / 2:  # a jump, not the top of a ramp
-                out[idx][max(1, min(jump, a)):min(n_frames - 1, max(jump, b - 1) + 1)] = True
-    return out
+                out[i, max(1, min(jump, a)):min(n_frames - 1, max(jump, b - 1) + 1)] = True
+    return out.reshape(x.shape[:-2])
 
 
 def calibrated_stillness(clips, *, share: float = 0.01) -> float:
