@@ -127,3 +127,18 @@ def test_a_freeze_is_found_where_a_jump_catches_it_up(tiny_clip):
     assert not caught_up_freezes(waited, 0.003).any()
     assert not caught_up_freezes(clean, 0.003).any()
     np.testing.assert_array_equal(caught_up_freezes(np.stack([frozen, clean]), 0.003)[1], np.zeros(len(clean), bool))
+
+
+def test_the_report_says_a_freeze_was_re_timed(humanact12):
+    from refiner.refinement.motion_refiner import MotionRefiner
+
+    clip = next(m.joints for m in humanact12.split("test") if m.n_frames >= 80 and m.action == 0)
+    frozen = clip.copy()
+    frozen[30:45] = clip[30]  # frozen for 14 frames, then a jump to where the motion is
+    given = frozen.copy()
+    out, report = MotionRefiner.pretrained("humanact12").refine(frozen, action=0, return_report=True)
+    np.testing.assert_array_equal(frozen, given)
+    runs = [c for c in report.changes + report.not_kept if c["step"] == "retime" and c["start"] <= 31 and c["stop"] >= 45]
+    assert runs and "14 frames frozen" in runs[0]["reason"]
+    if runs[0]["kept"]:
+        assert np.linalg.norm(out[31:45] - clip[31:45], axis=-1).mean() < np.linalg.norm(frozen[31:45] - clip[31:45], axis=-1).mean()

@@ -211,7 +211,8 @@ def _change(entry: dict, model: MotionModel) -> dict:
     how = _HOW.get(entry["step"], entry["step"])
     if "flaw_probability" in entry:
         before, after = entry["flaw_probability"]
-        reason = f"flaw probability {before:.2f} -> {after:.2f}; {how}"
+        frozen = f"; {entry['still_frames']} frames frozen" if entry.get("still_frames") else ""
+        reason = f"flaw probability {before:.2f} -> {after:.2f}{frozen}; {how}"
     elif entry["step"] == "glide":
         reason = f"body and planted feet slide {entry['gap_cm']:.1f} cm over the floor; {how}"
     else:

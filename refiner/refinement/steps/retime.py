@@ -117,6 +117,17 @@ class RetimeStep(InfillStep):
             flagged |= (grown & ~flagged.any(-1))[..., None]
         return prob, flagged
 
+    def verify(self, given, proposed, actions, flagged, probability) -> tuple[np.ndarray, list[list[dict]]]:
+        """:meth:`InfillStep.verify`; each entry also counts the run's ``still_frames`` (stiller than ``still_m``), so
+        the report can say that a freeze was re-timed."""
+        out, changes = super().verify(given, proposed, actions, flagged, probability)
+        if self.config.still_m > 0:
+            still = pace(given) < self.config.still_m
+            for i, entries in enumerate(changes):
+                for e in entries:
+                    e["still_frames"] = int(still[i, e["start"]:e["stop"]].sum())
+        return out, changes
+
     def propose(self, clips, actions, flagged, infill=None) -> np.ndarray:
         """The clips with each run of flagged frames (any part) re-timed by :func:`even_pace`; ``infill``, given, makes
         this the in-fill's proposal instead (the benchmark's stand-ins)."""
