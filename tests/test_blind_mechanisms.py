@@ -6,13 +6,16 @@ import numpy as np
 import pytest
 
 from refiner.core.skeletons import bone_lengths, get_skeleton, joint_bone_lengths
+from refiner.evaluation import blind_timing_mechanisms
 from refiner.evaluation.blind_mechanisms import MECHANISMS
 
 SKEL = get_skeleton("humanact12")
 # mechanisms that keep every frame's bone lengths exactly (sink_into_floor may stretch the legs, joint_jitter
 # adds position noise)
-KEEPS_BONES = {"wrong_limb_pose", "freeze_catch_up", "hover_above_ground", "foot_skate"}
+KEEPS_BONES = {"wrong_limb_pose", "freeze_catch_up", "hover_above_ground", "foot_skate", "stutter", "tempo_drift",
+               "dropped_frames_crawl"}
 GROUND = ["hover_above_ground", "foot_skate", "sink_into_floor", "joint_jitter"]
+TIMING = ["stutter", "tempo_drift", "dropped_frames_crawl"]
 VISIBLE_M = {"joint_jitter": 0.01}  # 1-2 cm RMS noise, the others move a few cm
 LEG_BONES = [4, 5, 7, 8]  # bones ending at the knees and ankles (thighs and shins)
 
@@ -101,7 +104,7 @@ def _changed_frames(out: np.ndarray, clip: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.real_data
-@pytest.mark.parametrize("name", GROUND)
+@pytest.mark.parametrize("name", GROUND + TIMING)
 def test_ground_mechanisms_on_real_clips_are_pure_local_and_seeded(name, real_clips):
     """On real clips: float32 of the same shape, input untouched, one window of 8-30 whole frames, seeded."""
     for clip in real_clips:
@@ -190,3 +193,97 @@ def test_severity_scales_the_flaw(name, real_clips):
     one = MECHANISMS[name](clip, np.random.default_rng(3), 1.0).astype(np.float64) - clip
     two = MECHANISMS[name](clip, np.random.default_rng(3), 2.0).astype(np.float64) - clip
     assert np.abs(two - 2.0 * one).max() < 1e-5
+
+
+# ---- timing mechanisms: the synthetic clip's root moves -z at exactly 6 cm a frame and is interpolated linearly,
+# so the played time of every output frame can be read back from the root
+
+
+def _played_time(out: np.ndarray) -> np.ndarray:
+    """Time (in frames) each frame of a re-timed ``_rigid_clip`` shows, from its root's z."""
+    return -out[:, 0, 2].astype(np.float64) / 0.06
+
+
+def _window_speeds(out: np.ndarray, clip: np.ndarray):
+    """Changed frames and the playback speed (played frames per frame) of each step into, through and out of them."""
+    changed = _changed_frames(out, clip)
+    speed = np.diff(_played_time(out))[changed[0] - 1:changed[-1] + 1]
+    return changed, speed
+
+
+def test_timing_mechanisms_are_all_in_the_registry():
+    assert set(TIMING) == set(blind_timing_mechanisms.MECHANISMS) and set(TIMING) <= set(MECHANISMS)
+    assert all(MECHANISMS[k] is blind_timing_mechanisms.MECHANISMS[k] for k in TIMING)
+    assert len(MECHANISMS) == 2 + len(GROUND) + len(TIMING)
+
+
+@pytest.mark.parametrize("name", TIMING)
+def test_timing_mechanisms_only_retime_and_rejoin_the_timeline(name):
+    """One 8-30 frame window; its poses are the clip's own at other times; the timeline is rejoined at its end."""
+    clip = _rigid_clip(120, seed=3)
+    for seed in range(10):
+        out = MECHANISMS[name](clip, np.random.default_rng(seed))
+        changed, speed = _window_speeds(out, clip)
+        assert 8 <= changed.size <= 30 and np.array_equal(changed, np.arange(changed[0], changed[-1] + 1))
+        assert np.array_equal(out[:changed[0]], clip[:changed[0]]) and np.array_equal(out[changed[-1] + 1:],
+                                                                                      clip[changed[-1] + 1:])
+        assert abs(speed.sum() - len(speed)) < 1e-3  # the time lost or gained inside is exactly made up
+        assert np.abs(bone_lengths(out, SKEL) - bone_lengths(clip, SKEL)).max() < 1e-5
+
+
+def test_stutter_runs_backwards_briefly_then_catches_up():
+    clip = _rigid_clip(120, seed=3)
+    for seed in range(10):
+        _, speed = _window_speeds(MECHANISMS["stutter"](clip, np.random.default_rng(seed)), clip)
+        back = np.flatnonzero(speed < -0.5)
+        assert 1 <= back.size <= 6 and back[0] == 0  # a few frames played in reverse, starting the window
+        assert (speed[back[-1] + 1:] > 0.9).all()  # afterwards only forwards: the replay, then the catch-up
+        assert speed.max() > 1.05
+
+
+def test_tempo_drift_slows_smoothly_without_freezing_then_speeds_up():
+    clip = _rigid_clip(120, seed=3)
+    for seed in range(10):
+        out = MECHANISMS["tempo_drift"](clip, np.random.default_rng(seed))
+        changed, speed = _window_speeds(out, clip)
+        assert 0.02 < speed.min() < 0.35 and speed.max() > 1.2  # near-still, never frozen, then faster
+        assert np.argmin(speed) < np.argmax(speed)  # the slow stretch comes first
+        assert np.abs(np.diff(speed)).max() < 0.75 * (speed.max() - speed.min())  # eases, no hard stop or start
+        moving = np.linalg.norm(np.diff(out[changed[0] - 1:changed[-1] + 2], axis=0), axis=-1).max(1)
+        assert moving.min() > 1e-4  # some residual motion in every frame
+
+
+def test_tempo_drift_keeps_a_small_residual_wobble():
+    """Beyond the re-timing, bones wobble a little: rotations of about a degree, none at zero severity."""
+    clip = _rigid_clip(120, seed=3)
+    for seed in range(5):
+        out = MECHANISMS["tempo_drift"](clip, np.random.default_rng(seed)).astype(np.float64)
+        tau = _played_time(out)
+        i0 = np.clip(np.floor(tau).astype(int), 0, len(clip) - 2)
+        f = (tau - i0)[:, None, None]
+        lerp = clip[i0] * (1 - f) + clip[i0 + 1] * f  # what a pure re-timing would show, near enough
+        rel = lambda y: y - y[:, :1]  # noqa: E731
+        gap = np.linalg.norm(rel(out) - rel(lerp), axis=-1).max()
+        assert 1e-3 < gap < 0.06
+
+
+def test_dropped_frames_jump_ahead_then_crawl():
+    clip = _rigid_clip(120, seed=3)
+    for seed in range(10):
+        _, speed = _window_speeds(MECHANISMS["dropped_frames_crawl"](clip, np.random.default_rng(seed)), clip)
+        jump = np.flatnonzero(speed > 1.5)
+        assert jump.size in (1, 2) and np.array_equal(jump, np.arange(jump.size))  # skipped at the start
+        crawl = speed[jump.size:]
+        assert (crawl > 0.04).all() and (crawl < 1.0 + 1e-6).all() and crawl.min() < 0.6  # slow, never a wait
+        assert (np.diff(crawl) > -1e-6).all()  # speeding back up to normal, never slowing again
+
+
+@pytest.mark.parametrize("name", TIMING)
+def test_timing_severity_scales_the_warp(name):
+    """Same seed, same window; a larger severity shifts the played time further."""
+    clip = _rigid_clip(120, seed=3)
+    frames = np.arange(len(clip))
+    for seed in range(5):
+        lags = [np.abs(_played_time(MECHANISMS[name](clip, np.random.default_rng(seed), s)) - frames).max()
+                for s in (0.5, 1.0, 2.0)]
+        assert lags[0] < lags[1] <= lags[2] + 1e-6 and lags[0] > 0.2

@@ -3,18 +3,22 @@
 Each mechanism maps a clean clip ``(T, 24, 3)`` (metres, y down, facing -z) to a flawed copy inside one
 random window of 8-30 frames with smooth edges; the two here keep every frame's own bone lengths exactly.
 ``MECHANISMS`` also holds the ground-contact and jitter ones of :mod:`refiner.evaluation.blind_ground_mechanisms`
-(hover, foot skate, sink, jitter; the last two change some bone lengths, as their docstrings say).
+(hover, foot skate, sink, jitter; the last two change some bone lengths, as their docstrings say) and the
+timing ones of :mod:`refiner.evaluation.blind_timing_mechanisms` (stutter, tempo drift, dropped frames with a crawl;
+re-timings that keep every frame's own bone lengths exactly).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from refiner.core.skeletons import get_skeleton
-from refiner.evaluation import blind_ground_mechanisms
+from refiner.evaluation.blind_geometry import rotate as _rotate, slerp as _slerp, unit as _unit
+from refiner.evaluation import blind_ground_mechanisms, blind_timing_mechanisms
 from refiner.evaluation.blind_ground_mechanisms import foot_skate, hover_above_ground, joint_jitter, sink_into_floor
+from refiner.evaluation.blind_timing_mechanisms import dropped_frames_crawl, stutter, tempo_drift
 
 __all__ = ["MECHANISMS", "wrong_limb_pose", "freeze_catch_up", "hover_above_ground", "foot_skate", "sink_into_floor",
-           "joint_jitter"]
+           "joint_jitter", "stutter", "tempo_drift", "dropped_frames_crawl"]
 
 _PARENTS = np.array(get_skeleton("humanact12").parents)
 # limb name -> (pivot joint, joints moved with it, torso frame: lateral pair, up pair)
@@ -24,26 +28,6 @@ _LIMBS = {
     "left_leg": (1, (4, 7, 10), (1, 2), (0, 3)),
     "right_leg": (2, (5, 8, 11), (1, 2), (0, 3)),
 }
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
-
-
-def _rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rodrigues rotation of vectors ``v`` about unit ``axis`` by ``angle`` (all broadcast)."""
-    c, s = np.cos(angle)[..., None], np.sin(angle)[..., None]
-    return v * c + np.cross(axis, v) * s + axis * (axis * v).sum(-1, keepdims=True) * (1.0 - c)
-
-
-def _slerp(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Unit directions a fraction ``w`` of the way along the great circle from ``a`` to ``b``."""
-    axis = np.cross(a, b)
-    n = np.linalg.norm(axis, axis=-1, keepdims=True)
-    ortho = np.cross(a, np.where(np.abs(a[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]))
-    axis = np.where(n > 1e-9, axis / np.maximum(n, 1e-12), _unit(ortho))
-    angle = np.arctan2(n[..., 0], (a * b).sum(-1))
-    return _rotate(a, axis, angle * w)
 
 
 def _profile(length: int, rng: np.random.Generator) -> np.ndarray:
@@ -189,4 +173,4 @@ def freeze_catch_up(clip: np.ndarray, rng: np.random.Generator, severity: float 
 
 
 MECHANISMS = {"wrong_limb_pose": wrong_limb_pose, "freeze_catch_up": freeze_catch_up,
-              **blind_ground_mechanisms.MECHANISMS}
+              **blind_ground_mechanisms.MECHANISMS, **blind_timing_mechanisms.MECHANISMS}
