@@ -3,9 +3,11 @@ run and every frame's bone lengths stay as given; a run grows over the frozen fr
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from refiner.core.bone_directions import retimed, to_bone_directions
-from refiner.refinement.steps.retime import calibrated_stillness, caught_up_freezes, even_pace, pace, still_grown
+from refiner.refinement.steps.retime import (RetimeConfig, calibrated_stillness, caught_up_freezes, even_pace, pace,
+                                             still_grown)
 
 
 def _steady(tiny_clip, n=40, speed=0.03):
@@ -46,6 +48,9 @@ def test_a_still_run_is_left_as_given(tiny_clip):
     np.testing.assert_array_equal(even_pace(still, frames, "humanact12"), still)
 
 
+FREEZES = RetimeConfig(threshold=0.5, still_m=0.003)
+
+
 def _frozen(tiny_clip):
     """A steady clip frozen on frame 10 until frame 20, where it jumps to where the motion is."""
     clean = _steady(tiny_clip)
@@ -74,7 +79,7 @@ def test_pace_is_the_mean_joint_step(tiny_clip):
     np.testing.assert_allclose(p[1:], 0.02)
 
 
-def test_real_capture_is_never_frozen(humanact12):
+def test_still_m_is_the_pace_few_clean_frames_stay_below(humanact12):
     clips = [m.joints for m in humanact12.split("train")][:200]
     still_m = calibrated_stillness(clips, share=0.01)
     assert 0.0005 < still_m < 0.01  # capture noise keeps a standing body moving by millimetres a frame
@@ -105,7 +110,7 @@ def test_the_step_flags_the_grown_frames_for_every_part(tiny_clip):
             p[:, 18:21, 0] = 1.0
             return None, p
 
-    step = RetimeStep(Seeded(), InfillConfig(threshold=0.5, margin=1, still_m=0.003))
+    step = RetimeStep(Seeded(), RetimeConfig(threshold=0.5, margin=1, still_m=0.003))
     _, flagged = step.detect(frozen[None], [None])
     assert np.flatnonzero(flagged[0].any(1)).tolist() == list(range(11, 22))
     assert flagged[0, 11:17].all() and not flagged[0, 17:22, 1:].any()  # seeded frames keep their own parts
@@ -115,18 +120,18 @@ def test_the_step_flags_the_grown_frames_for_every_part(tiny_clip):
 
 def test_a_freeze_is_found_where_a_jump_catches_it_up(tiny_clip):
     clean, frozen = _frozen(tiny_clip)  # frozen over 11-19, the jump at 20
-    np.testing.assert_array_equal(np.flatnonzero(caught_up_freezes(frozen, 0.003)), np.arange(11, 21))
+    np.testing.assert_array_equal(np.flatnonzero(caught_up_freezes(frozen, FREEZES)), np.arange(11, 21))
     skipped = clean.copy()  # a skip: 6 frames ahead at frame 10, then a wait until the clip catches up at 26
     skipped[10:26] = clean[np.minimum(np.arange(10, 26) + 6, 26)]
-    found = caught_up_freezes(skipped, 0.003)
+    found = caught_up_freezes(skipped, FREEZES)
     np.testing.assert_array_equal(np.flatnonzero(found), np.arange(10, 27))  # frame 26 is the wait's last
     np.testing.assert_allclose(even_pace(skipped, found, "humanact12"), clean, atol=1e-6)
     waited = clean.copy()  # a body that stops and then goes on at its pace has lost no time: no jump, no freeze
     waited[10:20] = clean[10]
     waited[20:] = clean[11:len(clean) - 9]
-    assert not caught_up_freezes(waited, 0.003).any()
-    assert not caught_up_freezes(clean, 0.003).any()
-    np.testing.assert_array_equal(caught_up_freezes(np.stack([frozen, clean]), 0.003)[1], np.zeros(len(clean), bool))
+    assert not caught_up_freezes(waited, FREEZES).any()
+    assert not caught_up_freezes(clean, FREEZES).any()
+    np.testing.assert_array_equal(caught_up_freezes(np.stack([frozen, clean]), FREEZES)[1], np.zeros(len(clean), bool))
 
 
 def test_the_report_says_a_freeze_was_re_timed(humanact12):
@@ -138,7 +143,55 @@ def test_the_report_says_a_freeze_was_re_timed(humanact12):
     given = frozen.copy()
     out, report = MotionRefiner.pretrained("humanact12").refine(frozen, action=0, return_report=True)
     np.testing.assert_array_equal(frozen, given)
-    runs = [c for c in report.changes + report.not_kept if c["step"] == "retime" and c["start"] <= 31 and c["stop"] >= 45]
+    runs = [c for c in report.changes + report.not_kept
+            if c["step"] == "retime" and c["start"] <= 31 and c["stop"] >= 45]
     assert runs and "14 frames frozen" in runs[0]["reason"]
-    if runs[0]["kept"]:
-        assert np.linalg.norm(out[31:45] - clip[31:45], axis=-1).mean() < np.linalg.norm(frozen[31:45] - clip[31:45], axis=-1).mean()
+    assert runs[0]["kept"]
+    error = lambda x: np.linalg.norm(x[31:45] - clip[31:45], axis=-1).mean()  # noqa: E731
+    assert error(out) < error(frozen) / 1.5
+
+
+def test_a_freeze_needs_its_frames_and_its_jump(tiny_clip):
+    clean, frozen = _frozen(tiny_clip)  # 9 still steps, a jump of 10 steps' path
+    assert not caught_up_freezes(frozen, RetimeConfig(threshold=0.5, still_m=0.003, freeze_frames=10)).any()
+    assert not caught_up_freezes(frozen, RetimeConfig(threshold=0.5, still_m=0.003, catch_up=1.2)).any()
+    assert caught_up_freezes(frozen, RetimeConfig(threshold=0.5, still_m=0.003, catch_up=0.9)).any()
+    assert not caught_up_freezes(frozen, RetimeConfig(threshold=0.5, still_m=0.0)).any()
+
+
+def test_bad_input_is_refused_by_name(tiny_clip):
+    clean, frozen = _frozen(tiny_clip)
+    with pytest.raises(ValueError, match="frames"):
+        still_grown(frozen, np.zeros((2, len(frozen)), bool), 0.003)
+    with pytest.raises(ValueError, match="joints"):
+        pace(frozen[:, :, 0])
+    with pytest.raises(ValueError, match="T >= 2"):
+        calibrated_stillness([frozen[:1]], share=0.01)
+    with pytest.raises(ValueError, match="no clips"):
+        calibrated_stillness([], share=0.01)
+    for bad in ({"still_m": -0.001}, {"still_m": float("nan")}, {"freeze_frames": 0}, {"reach": 0.0}):
+        with pytest.raises(ValueError):
+            RetimeConfig(threshold=0.5, **bad)
+    given = frozen.copy()
+    still_grown(frozen, np.ones(len(frozen), bool), 0.003)
+    caught_up_freezes(frozen, FREEZES)
+    np.testing.assert_array_equal(frozen, given)
+
+
+def test_ground_only_recalibrates_the_shipped_stillness(tmp_path, humanact12):
+    import argparse
+    import json
+    from pathlib import Path
+
+    from refiner.cli.train_motion import train_motion_run
+
+    shipped = Path(__file__).resolve().parents[1] / "refiner" / "weights" / "humanact12-motion" / "manifest.json"
+    (tmp_path / "humanact12-motion").mkdir()
+    copy = tmp_path / "humanact12-motion" / "manifest.json"
+    manifest = json.loads(shipped.read_text())
+    copy.write_text(json.dumps({k: v for k, v in manifest.items() if k != "retime"}))
+    args = argparse.Namespace(out=tmp_path, dataset="humanact12", data=None, steps=1, folds=False, ground_only=True,
+                              jobs=1)
+    assert train_motion_run(args) == 0
+    written = json.loads(copy.read_text())
+    assert written["retime"] == manifest["retime"] and written["ground"] == manifest["ground"]

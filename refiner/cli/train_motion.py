@@ -129,7 +129,8 @@ def _support(ds, calibrate) -> dict:
     for step, (key, value) in heights.items():
         print(f"{step}: {key} {value}" + ("" if value else " (the clean clips do not allow it: no such step)"), flush=True)
     still_m = calibrated_stillness(clips, share=cal.still_share)
-    print(f"retime: still_m {still_m}", flush=True)
+    print(f"retime: still_m {still_m}" + ("" if still_m > 0 else " (the clips hold exact repeats: freezes left alone)"),
+          flush=True)
     return {**{step: {key: round(value, 4)} for step, (key, value) in heights.items() if value},
             "retime": {"still_m": round(still_m, 5)}}
 

@@ -1,9 +1,15 @@
-"""Vector helpers the blind flaw mechanisms share: unit vectors, rotation about an axis, great-circle blends."""
+"""Vector helpers the blind flaw mechanisms share: unit vectors, rotation about an axis, great-circle blends, and
+the bones of a HumanAct12 clip."""
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["unit", "rotate", "slerp"]
+from refiner.core.skeletons import get_skeleton
+
+__all__ = ["unit", "rotate", "slerp", "bones", "PARENTS"]
+
+#: HumanAct12's parent of each joint (-1 at the root).
+PARENTS = np.array(get_skeleton("humanact12").parents)
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -25,3 +31,12 @@ def slerp(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     axis = np.where(n > 1e-9, axis / np.maximum(n, 1e-12), unit(ortho))
     angle = np.arctan2(n[..., 0], (a * b).sum(-1))
     return rotate(a, axis, angle * w)
+
+
+def bones(x: np.ndarray):
+    """``x (T, 24, 3)`` -> unit bone directions ``(T, 24, 3)`` and lengths ``(T, 24)`` metres of the bone ending at each
+    joint (0 at the root)."""
+    v = x - x[:, np.maximum(PARENTS, 0)]
+    v[:, PARENTS < 0] = 0.0
+    n = np.linalg.norm(v, axis=-1)
+    return v / np.maximum(n, 1e-12)[..., None], n

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from refiner.core.skeletons import get_skeleton
+from refiner.evaluation.blind_geometry import PARENTS as _PARENTS, unit as _unit
 
 __all__ = ["MECHANISMS", "hover_above_ground", "foot_skate", "sink_into_floor", "joint_jitter"]
 
 _FPS = 20.0
 _UP = np.array([0.0, -1.0, 0.0])
-_PARENTS = np.array(get_skeleton("humanact12").parents)
 # leg -> (hip, knee, ankle, foot)
 _LEGS = {"left": (1, 4, 7, 10), "right": (2, 5, 8, 11)}
 # joint groups a jitter burst can shake
@@ -63,10 +62,6 @@ def _horizontal_basis(seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     left = left - (left @ _UP) * _UP
     left = left / np.linalg.norm(left) if np.linalg.norm(left) > 1e-9 else np.array([1.0, 0.0, 0.0])
     return np.cross(left, _UP), left
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
 def _leg_ik(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np.ndarray, fallback: np.ndarray):

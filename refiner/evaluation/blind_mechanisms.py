@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from refiner.core.skeletons import get_skeleton
-from refiner.evaluation.blind_geometry import rotate as _rotate, slerp as _slerp, unit as _unit
+from refiner.evaluation.blind_geometry import (PARENTS as _PARENTS, bones as _bones, rotate as _rotate, slerp as _slerp,
+                                               unit as _unit)
 from refiner.evaluation import blind_ground_mechanisms, blind_timing_mechanisms
 from refiner.evaluation.blind_ground_mechanisms import foot_skate, hover_above_ground, joint_jitter, sink_into_floor
 from refiner.evaluation.blind_timing_mechanisms import dropped_frames_crawl, stutter, tempo_drift
@@ -20,7 +20,6 @@ from refiner.evaluation.blind_timing_mechanisms import dropped_frames_crawl, stu
 __all__ = ["MECHANISMS", "wrong_limb_pose", "freeze_catch_up", "hover_above_ground", "foot_skate", "sink_into_floor",
            "joint_jitter", "stutter", "tempo_drift", "dropped_frames_crawl"]
 
-_PARENTS = np.array(get_skeleton("humanact12").parents)
 # limb name -> (pivot joint, joints moved with it, torso frame: lateral pair, up pair)
 _LIMBS = {
     "left_arm": (16, (18, 20, 22), (16, 17), (9, 12)),
@@ -54,14 +53,6 @@ def _rebuild(base: np.ndarray, dirs: np.ndarray, lengths: np.ndarray, joints) ->
     for j in joints:
         out[:, j] = out[:, _PARENTS[j]] + lengths[:, j, None] * dirs[:, j]
     return out
-
-
-def _bones(x: np.ndarray):
-    """Unit bone directions and lengths ``(T, J, 3)``, ``(T, J)`` of the bone ending at each joint."""
-    v = x - x[:, np.maximum(_PARENTS, 0)]
-    v[:, _PARENTS < 0] = 0.0
-    n = np.linalg.norm(v, axis=-1)
-    return v / np.maximum(n, 1e-12)[..., None], n
 
 
 def _window(n_frames: int, rng: np.random.Generator, lo: int = 8, hi: int = 30, energy=None):

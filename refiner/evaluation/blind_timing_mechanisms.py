@@ -18,21 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from refiner.core.skeletons import get_skeleton
-from refiner.evaluation.blind_geometry import rotate as _rotate, slerp as _slerp, unit as _unit
+from refiner.evaluation.blind_geometry import (PARENTS as _PARENTS, bones as _bones, rotate as _rotate, slerp as _slerp,
+                                               unit as _unit)
 
 __all__ = ["MECHANISMS", "stutter", "tempo_drift", "dropped_frames_crawl"]
 
-_PARENTS = np.array(get_skeleton("humanact12").parents)
 _MAX_WINDOW = 30
-
-
-def _bones(x: np.ndarray):
-    """Unit bone directions and lengths ``(T, J, 3)``, ``(T, J)`` of the bone ending at each joint (0 at the root)."""
-    v = x - x[:, np.maximum(_PARENTS, 0)]
-    v[:, _PARENTS < 0] = 0.0
-    n = np.linalg.norm(v, axis=-1)
-    return v / np.maximum(n, 1e-12)[..., None], n
 
 
 def _window_start(x: np.ndarray, length: int, margin: int, rng: np.random.Generator) -> int:

@@ -27,7 +27,7 @@ from refiner.refinement.motion_model import MotionModel
 from refiner.refinement.report import start_reports
 from refiner.refinement.steps.ground import GlideConfig, GlideStep, GroundConfig, GroundStep
 from refiner.refinement.steps.infill import InfillConfig, clip_scores
-from refiner.refinement.steps.retime import RetimeStep
+from refiner.refinement.steps.retime import RetimeConfig, RetimeStep
 
 __all__ = ["MotionRefiner", "CalibrationConfig", "calibrated_threshold", "write_motion_weights"]
 
@@ -67,8 +67,8 @@ def write_motion_weights(folder, models: dict, thresholds: dict, *, skeleton: st
                          split: str = "train", calibration: CalibrationConfig = CalibrationConfig(),
                          support: dict | None = None, notes: dict | None = None) -> None:
     """Save motion ``models`` (name -> MotionModel; ``"all"`` is the default, ``"fold0"`` / ``"fold1"`` the benchmark's)
-    with their calibrated ``thresholds``, the support steps' calibrated heights ``support`` (``{"ground": fields of
-    GroundConfig, "glide": fields of GlideConfig}``, either left out) and a ``manifest.json``."""
+    with their calibrated ``thresholds``, the calibrated ``support`` values (``{"ground": fields of GroundConfig,
+    "glide": fields of GlideConfig, "retime": {"still_m": ...}}``, any left out) and a ``manifest.json``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     entries = {}
@@ -89,8 +89,9 @@ class MotionRefiner:
     Parameters
     ----------
     model : MotionModel
-    config : InfillConfig
-        Its ``threshold`` comes from the weights' manifest (:func:`calibrated_threshold`).
+    config : RetimeConfig or InfillConfig
+        Its ``threshold`` and ``still_m`` come from the weights' manifest (:func:`calibrated_threshold`,
+        :func:`~refiner.refinement.steps.retime.calibrated_stillness`); an :class:`InfillConfig` leaves freezes alone.
     ground, glide : GroundConfig, GlideConfig, optional
         The support steps' options (their heights from the manifest); None leaves a step out.
     skeleton : str, optional
@@ -114,7 +115,8 @@ class MotionRefiner:
     def pretrained(cls, skeleton: str = "humanact12", *, model: str = "all", weights=None, **options) -> "MotionRefiner":
         """The shipped motion model of ``skeleton`` (``model``: ``"all"``, or ``"fold0"`` / ``"fold1"``, the benchmark's,
         each trained without one fold of flaw mechanisms); ``weights``: a folder holding ``<skeleton>-motion/``, looked
-        in first. ``options`` replace fields of :class:`InfillConfig`."""
+        in first. ``options`` replace fields of :class:`~refiner.refinement.steps.retime.RetimeConfig` (its
+        ``threshold`` and ``still_m`` come from the manifest)."""
         name = get_skeleton(skeleton).name
         base = "humanact12" if name in _CONVERTED else name
         folders = [Path(w) / f"{base}-motion" for w in ([weights] if weights else [])] + [_WEIGHTS / f"{base}-motion"]
@@ -131,7 +133,7 @@ class MotionRefiner:
             if file_sha256(path) != entry["sha256"]:
                 raise ValueError(f"{path} does not match the sha256 in its manifest; reinstall or retrain it.")
             _CACHE[key] = MotionModel.load(path)
-        config = InfillConfig(**{"threshold": entry["threshold"], **manifest.get("retime", {}), **options})
+        config = RetimeConfig(**{"threshold": entry["threshold"], **manifest.get("retime", {}), **options})
         ground = GroundConfig(**manifest["ground"]) if "ground" in manifest else None
         glide = GlideConfig(**manifest["glide"]) if "glide" in manifest else None
         return cls(_CACHE[key], config, ground=ground, glide=glide, skeleton=name)
@@ -211,7 +213,7 @@ def _change(entry: dict, model: MotionModel) -> dict:
     how = _HOW.get(entry["step"], entry["step"])
     if "flaw_probability" in entry:
         before, after = entry["flaw_probability"]
-        frozen = f"; {entry['still_frames']} frames frozen" if entry.get("still_frames") else ""
+        frozen = f"; {entry['still_frames']} frames frozen" if entry.get("still_frames", 0) >= 2 else ""
         reason = f"flaw probability {before:.2f} -> {after:.2f}{frozen}; {how}"
     elif entry["step"] == "glide":
         reason = f"body and planted feet slide {entry['gap_cm']:.1f} cm over the floor; {how}"

@@ -23,9 +23,7 @@ __all__ = ["InfillConfig", "InfillStep", "flagged_parts", "clip_scores"]
 
 @dataclass(frozen=True)
 class InfillConfig:
-    """Options of :class:`InfillStep`; ``threshold`` and ``still_m`` are calibrated (the manifest's), the others are
-    choices. ``still_m``: the re-timing grows its runs over frames stiller than this (metres per frame; 0: it does not,
-    :func:`~refiner.refinement.steps.retime.still_grown`)."""
+    """Options of :class:`InfillStep`; ``threshold`` is calibrated (the manifest's), the others are choices."""
 
     threshold: float
     min_run: int = 2
@@ -33,7 +31,6 @@ class InfillConfig:
     jerk_share: float = 0.05
     slack_m: float = 0.0
     min_gain: float = 0.0
-    still_m: float = 0.0
 
 
 def clip_scores(probability, min_run: int) -> np.ndarray:

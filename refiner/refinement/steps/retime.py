@@ -1,15 +1,19 @@
 """Re-timing: each flagged run of frames played again along its own path at an even pace (the paper's transition
 re-timing), kept where verified.
 
-Generators stall, skip ahead and catch up: the poses are right and their timing is wrong. ``detect`` and ``verify``
-are the motion model's (:class:`~refiner.refinement.steps.infill.InfillStep`); ``propose`` re-samples the frames of
-each flagged run, between the kept frames that bound it, at even steps of the body's path length (mean joint
-displacement); every frame keeps its own bone lengths. Chosen over the in-fill on the calibration subjects (``docs/decisions.md`` D20).
-A flagged run first grows over the frames next to it in which the body stands stiller than real capture does
-(``still_m``, calibrated on clean clips): a freeze is where the lost time went, so it belongs to the run (D27). A
-freeze the detector missed is flagged too where a jump near it makes up the time it lost (:func:`caught_up_freezes`, D29).
+Generators stall, skip ahead and catch up: the poses are right and their timing is wrong. ``detect`` starts from the
+motion model's flags (:class:`~refiner.refinement.steps.infill.InfillStep`) and adds the freezes it missed where a
+jump near them catches up the time they lost (:func:`caught_up_freezes`, D29); every run then grows over the frames
+beside it in which the body stands stiller than all but ``still_share`` of clean capture (``still_m``, calibrated on
+clean clips): a freeze is where the lost time went, so it belongs to the run (D27). ``propose`` re-samples the
+frames of each run, between the kept frames that bound it, at even steps of the body's path length (mean joint
+displacement); every frame keeps its own bone lengths. Chosen over the in-fill on the calibration subjects (D20).
+``verify`` is the model's (:meth:`InfillStep.verify`), and counts each run's frozen frames for the report.
 """
 from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -17,9 +21,31 @@ from refiner.concepts.transitions import arc_length_profile
 from refiner.core.bone_directions import from_bone_directions, retimed, to_bone_directions
 from refiner.core.skeletons import get_skeleton
 from refiner.refinement.steps.base import runs
-from refiner.refinement.steps.infill import InfillStep
+from refiner.refinement.steps.infill import InfillConfig, InfillStep
 
-__all__ = ["RetimeStep", "even_pace", "pace", "still_grown", "caught_up_freezes", "calibrated_stillness"]
+__all__ = ["RetimeConfig", "RetimeStep", "even_pace", "pace", "still_grown", "caught_up_freezes",
+           "calibrated_stillness"]
+
+
+@dataclass(frozen=True)
+class RetimeConfig(InfillConfig):
+    """Options of :class:`RetimeStep`: those of :class:`InfillConfig`, and for its freezes ``still_m`` (calibrated,
+    the manifest's ``"retime"``: metres per frame; 0 leaves freezes alone, as an :class:`InfillConfig` does),
+    ``freeze_frames`` (the fewest still steps a freeze the detector missed needs), ``reach`` (how far from such a
+    freeze its jump may be, in freeze lengths) and ``catch_up`` (the share of the freeze's lost path the jump must
+    make up)."""
+
+    still_m: float = 0.0
+    freeze_frames: int = 2
+    reach: float = 2.0
+    catch_up: float = 0.5
+
+    def __post_init__(self):
+        if not (math.isfinite(self.still_m) and self.still_m >= 0):
+            raise ValueError(f"`still_m` must be a finite pace of 0 or more metres per frame; got {self.still_m}.")
+        if self.freeze_frames < 1 or not self.reach > 0 or not self.catch_up > 0:
+            raise ValueError("`freeze_frames` must be at least 1 and `reach` and `catch_up` above 0; got "
+                             f"{self.freeze_frames}, {self.reach}, {self.catch_up}.")
 
 
 def even_pace(joints, frames, skeleton) -> np.ndarray:
@@ -45,21 +71,30 @@ def pace(joints) -> np.ndarray:
     """``joints (..., T, J, 3)`` metres -> ``(..., T)`` metres per frame: the mean joint displacement from the frame
     before (frame 0: infinite, it has none)."""
     x = np.asarray(joints, dtype=np.float64)
+    if x.ndim < 3 or x.shape[-1] != 3 or x.shape[-3] < 1:
+        raise ValueError(f"`joints` must be (..., T, J, 3) with T >= 1; got shape {x.shape}.")
     d = np.diff(x, axis=-3)
     step = np.sqrt(np.einsum("...i,...i->...", d, d)).mean(-1)
     return np.concatenate([np.full(step.shape[:-1] + (1,), np.inf), step], -1)
 
 
-def still_grown(joints, frames, still_m: float) -> np.ndarray:
-    """``frames (..., T)`` bool with every run grown back and forward over the frames next to it whose :func:`pace`
-    is below ``still_m`` (the body stands stiller than that); growth stops short of the first and last frame."""
+def _frames_of(joints, frames) -> np.ndarray:
     f = np.asarray(frames, bool)
-    p = pace(joints).reshape(-1, f.shape[-1])
-    out = f.reshape(-1, f.shape[-1]).copy()
-    n = out.shape[-1]
-    for i in np.flatnonzero(out.any(-1)):
+    if np.shape(joints)[:-2] != f.shape:
+        raise ValueError(f"`frames` must be (..., T) as `joints` (..., T, J, 3); got {f.shape} and {np.shape(joints)}.")
+    return f
+
+
+def still_grown(joints, frames, still_m: float, *, speeds=None) -> np.ndarray:
+    """``frames (..., T)`` bool with every run grown back and forward over the frames next to it whose :func:`pace`
+    (``speeds``, when already computed) is below ``still_m``; growth stops short of the first and last frame."""
+    f = _frames_of(joints, frames)
+    n = f.shape[-1]
+    p = (pace(joints) if speeds is None else np.asarray(speeds)).reshape(-1, n)
+    given, out = f.reshape(-1, n), f.reshape(-1, n).copy()
+    for i in np.flatnonzero(given.any(-1)):
         still = p[i] < still_m
-        for s, e in runs(f.reshape(out.shape)[i]):
+        for s, e in runs(given[i]):
             while s > 1 and still[s - 1]:
                 s -= 1
             while e < n - 1 and still[e]:
@@ -68,52 +103,76 @@ def still_grown(joints, frames, still_m: float) -> np.ndarray:
     return out.reshape(f.shape)
 
 
-def caught_up_freezes(joints, still_m: float, min_run: int = 2) -> np.ndarray:
-    """``joints (..., T, J, 3)`` -> ``(..., T)`` bool: each run of ``min_run`` or more frames stiller than ``still_m``
-    (see :func:`still_grown`) that a jump near it catches up, with the frames between them. The jump is the fastest
-    frame within twice the freeze's length of it; its step beyond the faster of the steps beside it must cover at least
-    half the path the body would have travelled during the freeze at its usual pace (the median pace of the moving
-    frames that near), as a body that froze and then caught up does; the first and last frame stay out."""
+def caught_up_freezes(joints, config: RetimeConfig, *, speeds=None) -> np.ndarray:
+    """``joints (..., T, J, 3)`` -> ``(..., T)`` bool: the freezes that a jump near them catches up, from the jump to
+    the freeze's last frame.
+
+    A freeze is a run of ``config.freeze_frames`` or more frames whose :func:`pace` (``speeds``, when already
+    computed) is below ``config.still_m``: ``n`` still steps, frames ``a .. a+n-1``, each as far as it got from the
+    frame before (the frame before ``a`` is where it froze, and stays as given). Its jump is the fastest frame among
+    the ``reach * n + 1`` frames before ``a`` and after the freeze (never frame 0); its step beyond the faster of the
+    steps beside it must make up ``catch_up`` of the path the body would have travelled in those ``n`` steps at its
+    usual pace (the median pace of the moving frames in that reach, the jump among them), as a body that froze and
+    then caught up does. The first and last frame stay out."""
     x = np.asarray(joints, dtype=np.float64)
-    p = pace(x).reshape(-1, x.shape[-3])
-    out, still = np.zeros(p.shape, bool), p < still_m
-    n_frames = p.shape[-1]
-    paired = still[:, 1:] & still[:, :-1] if min_run > 1 else still
-    for i in np.flatnonzero(paired.any(-1)):  # most clips have no freeze to look at
+    n_frames = x.shape[-3] if x.ndim >= 3 else 0
+    p = (pace(x) if speeds is None else np.asarray(speeds)).reshape(-1, n_frames)
+    out, still = np.zeros(p.shape, bool), p < config.still_m
+    if config.still_m <= 0:
+        return out.reshape(x.shape[:-2])
+    m = config.freeze_frames
+    long_enough = np.ones_like(still[:, m - 1:])  # clips with a run of m still frames, the only ones to look at
+    for k in range(m):
+        long_enough &= still[:, k:n_frames - m + 1 + k]
+    for i in np.flatnonzero(long_enough.any(-1)):
         q = p[i]
         for a, b in runs(still[i]):
             n = b - a
-            near = np.r_[max(1, a - 2 * n - 1):a, b:min(n_frames, b + 2 * n + 1)]
-            moving = q[near][q[near] >= still_m]
-            if n < min_run or not len(moving):
+            if n < m:
+                continue
+            span = int(config.reach * n) + 1
+            near = np.r_[max(1, a - span):a, b:min(n_frames, b + span)]
+            moving = q[near][q[near] >= config.still_m]
+            if not len(moving):
                 continue
             jump = int(near[np.argmax(q[near])])
             beside = q[[t for t in (jump - 1, jump + 1) if 1 <= t < n_frames]].max()
-            if q[jump] - beside >= np.median(moving) * n / 2:  # a jump, not the top of a ramp
+            if q[jump] - beside >= np.median(moving) * n * config.catch_up:  # a jump, not the top of a ramp
                 out[i, max(1, min(jump, a)):min(n_frames - 1, max(jump, b - 1) + 1)] = True
     return out.reshape(x.shape[:-2])
 
 
-def calibrated_stillness(clips, *, share: float = 0.01) -> float:
-    """``still_m``: the pace (metres per frame) that only ``share`` of the frames of the clean ``clips ((T, J, 3)
-    metres each, real, unseen by the model)`` stay below: real capture never stands stiller than that."""
-    return float(np.quantile(np.concatenate([pace(c)[1:] for c in clips]), share))
+def calibrated_stillness(clips, *, share: float) -> float:
+    """``still_m``: the pace (metres per frame) that only ``share`` of the frames of the clean ``clips`` (each ``(T,
+    J, 3)`` metres, T >= 2, real and unseen by the model) stay below."""
+    steps = []
+    for c in clips:
+        if np.ndim(c) != 3 or len(c) < 2:
+            raise ValueError(f"each clip must be (T, J, 3) with T >= 2; got shape {np.shape(c)}.")
+        steps.append(pace(c)[1:])
+    if not steps:
+        raise ValueError("no clips to calibrate `still_m` on.")
+    return float(np.quantile(np.concatenate(steps), share))
 
 
 class RetimeStep(InfillStep):
-    """The motion model's detect / verify around :func:`even_pace` (see the module docstring)."""
+    """Detect, propose, verify and report of the re-timing (see the module docstring); an :class:`InfillConfig`
+    given in place of a :class:`RetimeConfig` leaves freezes alone."""
 
     name = "retime"
     moves_whole_body = True
 
+    def __init__(self, model, config: InfillConfig):
+        super().__init__(model, config if isinstance(config, RetimeConfig) else RetimeConfig(**asdict(config)))
+
     def detect(self, clips, actions) -> tuple[np.ndarray, np.ndarray]:
-        """The motion model's flags (:meth:`InfillStep.detect`) and, where ``still_m`` is set, the
-        :func:`caught_up_freezes`, each run grown over the still frames next to it (:func:`still_grown`); frames the
-        model did not flag are flagged for every part."""
+        """The motion model's flags (:meth:`InfillStep.detect`) and the :func:`caught_up_freezes`, each run grown over
+        the still frames next to it (:func:`still_grown`); frames the model did not flag are flagged for every part."""
         prob, flagged = super().detect(clips, actions)
         if self.config.still_m > 0:
-            seeds = flagged.any(-1) | caught_up_freezes(clips, self.config.still_m, self.config.min_run)
-            grown = still_grown(clips, seeds, self.config.still_m)
+            speeds = pace(clips)
+            seeds = flagged.any(-1) | caught_up_freezes(clips, self.config, speeds=speeds)
+            grown = still_grown(clips, seeds, self.config.still_m, speeds=speeds)
             flagged |= (grown & ~flagged.any(-1))[..., None]
         return prob, flagged
 
