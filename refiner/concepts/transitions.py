@@ -20,6 +20,7 @@ from torch import nn
 
 from refiner.concepts.segmentation import Segmentation
 from refiner.core.serialization import load_state, save_state
+from refiner.core.signal import pace
 from refiner.core.validation import check_is_fitted, check_random_state
 from refiner.nn.components import NOT_FITTED, NetworkComponent
 from refiner.nn.layers import MLP, mpjpe
@@ -335,8 +336,7 @@ def _transition_batch(arrays: dict, idx, device) -> dict:
 
 def arc_length_profile(frames: np.ndarray) -> np.ndarray:
     """Cumulative mean-joint path length of ``(L, J, 3)`` frames, normalised to end at 1, ``(L,)``."""
-    steps = np.linalg.norm(np.diff(frames, axis=0), axis=-1).mean(-1)
-    s = np.concatenate([[0.0], np.cumsum(steps)])
+    s = np.concatenate([[0.0], np.cumsum(pace(frames)[1:])])
     return s / s[-1] if s[-1] > 1e-9 else np.linspace(0.0, 1.0, len(frames))
 
 

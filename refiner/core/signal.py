@@ -1,9 +1,10 @@
-"""Small pure functions on frame sequences: ramps, resampling, linear in-filling, overlapping windows and their blend."""
+"""Small pure functions on frame sequences: the body's pace, ramps, resampling, linear in-filling, overlapping windows
+and their blend."""
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["norms", "smoothstep", "resample", "linear_infill", "window_starts", "overlap_add"]
+__all__ = ["norms", "pace", "smoothstep", "resample", "linear_infill", "window_starts", "overlap_add"]
 
 
 def norms(v: np.ndarray) -> np.ndarray:
@@ -18,6 +19,16 @@ def norms(v: np.ndarray) -> np.ndarray:
     for c in range(1, v.shape[-1]):
         out += v[..., c] * v[..., c]
     return np.sqrt(out)
+
+
+def pace(joints) -> np.ndarray:
+    """``joints (..., T, J, 3)`` metres -> ``(..., T)`` metres per frame: the mean joint displacement from the frame
+    before (frame 0: infinite, it has none)."""
+    x = np.asarray(joints, dtype=np.float64)
+    if x.ndim < 3 or x.shape[-1] != 3 or x.shape[-3] < 1:
+        raise ValueError(f"`joints` must be (..., T, J, 3) with T >= 1; got shape {x.shape}.")
+    step = norms(np.diff(x, axis=-3)).mean(-1)
+    return np.concatenate([np.full(step.shape[:-1] + (1,), np.inf), step], -1)
 
 
 def smoothstep(u):

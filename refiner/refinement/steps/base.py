@@ -13,7 +13,7 @@ import numpy as np
 from refiner.core.contact import foot_joints, heights
 from refiner.core.skeletons import get_skeleton
 
-__all__ = ["runs", "dilated", "WindowFigures", "window_figures", "harms"]
+__all__ = ["runs", "grown", "dilated", "WindowFigures", "window_figures", "harms"]
 
 
 def runs(mask) -> list[tuple[int, int]]:
@@ -21,6 +21,17 @@ def runs(mask) -> list[tuple[int, int]]:
     m = np.concatenate([[False], np.asarray(mask, bool), [False]])
     edges = np.flatnonzero(m[1:] != m[:-1])
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def grown(start: int, stop: int, allowed) -> tuple[int, int]:
+    """The run ``[start, stop)`` grown back and forward over the frames where ``allowed (T,)`` holds, stopping short
+    of the first and last frame (which bound every repair)."""
+    n = len(allowed)
+    while start > 1 and allowed[start - 1]:
+        start -= 1
+    while stop < n - 1 and allowed[stop]:
+        stop += 1
+    return start, stop
 
 
 def dilated(mask, before: int, after: int | None = None) -> np.ndarray:

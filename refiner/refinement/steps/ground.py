@@ -23,7 +23,7 @@ from refiner.core.contact import contact_joints, foot_joints, heights
 from refiner.core.floor import (floor_gap, floor_plane, levelled, plane_basis, plane_height, support_heights,
                                 support_joints)
 from refiner.core.skeletons import get_skeleton
-from refiner.refinement.steps.base import harms, runs, window_figures
+from refiner.refinement.steps.base import grown, harms, runs, window_figures
 
 __all__ = ["GroundConfig", "GroundStep", "grown_runs", "float_runs", "calibrated_ground", "GlideConfig", "GlideStep",
            "glide_offset", "glide_runs", "calibrated_glide"]
@@ -76,10 +76,7 @@ def grown_runs(size, limit: float, min_run: int, edge_share: float) -> list[tupl
     for s, e in runs(np.asarray(size) > limit):
         if e - s < min_run:
             continue
-        while s > 1 and size[s - 1] > edge_share * limit:
-            s -= 1
-        while e < n - 1 and size[e] > edge_share * limit:
-            e += 1
+        s, e = grown(s, e, np.asarray(size) > edge_share * limit)
         s, e = max(s, 1), min(e, n - 1)
         if e > s:
             out.append((s, e))

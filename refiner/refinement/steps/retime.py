@@ -19,12 +19,12 @@ import numpy as np
 
 from refiner.concepts.transitions import arc_length_profile
 from refiner.core.bone_directions import from_bone_directions, retimed, to_bone_directions
+from refiner.core.signal import pace
 from refiner.core.skeletons import get_skeleton
-from refiner.refinement.steps.base import runs
+from refiner.refinement.steps.base import grown, runs
 from refiner.refinement.steps.infill import InfillConfig, InfillStep
 
-__all__ = ["RetimeConfig", "RetimeStep", "even_pace", "pace", "still_grown", "caught_up_freezes",
-           "calibrated_stillness"]
+__all__ = ["RetimeConfig", "RetimeStep", "even_pace", "still_grown", "caught_up_freezes", "calibrated_stillness"]
 
 
 @dataclass(frozen=True)
@@ -67,17 +67,6 @@ def even_pace(joints, frames, skeleton) -> np.ndarray:
     return out
 
 
-def pace(joints) -> np.ndarray:
-    """``joints (..., T, J, 3)`` metres -> ``(..., T)`` metres per frame: the mean joint displacement from the frame
-    before (frame 0: infinite, it has none)."""
-    x = np.asarray(joints, dtype=np.float64)
-    if x.ndim < 3 or x.shape[-1] != 3 or x.shape[-3] < 1:
-        raise ValueError(f"`joints` must be (..., T, J, 3) with T >= 1; got shape {x.shape}.")
-    d = np.diff(x, axis=-3)
-    step = np.sqrt(np.einsum("...i,...i->...", d, d)).mean(-1)
-    return np.concatenate([np.full(step.shape[:-1] + (1,), np.inf), step], -1)
-
-
 def _frames_of(joints, frames) -> np.ndarray:
     f = np.asarray(frames, bool)
     if np.shape(joints)[:-2] != f.shape:
@@ -95,10 +84,7 @@ def still_grown(joints, frames, still_m: float, *, speeds=None) -> np.ndarray:
     for i in np.flatnonzero(given.any(-1)):
         still = p[i] < still_m
         for s, e in runs(given[i]):
-            while s > 1 and still[s - 1]:
-                s -= 1
-            while e < n - 1 and still[e]:
-                e += 1
+            s, e = grown(s, e, still)
             out[i, s:e] = True
     return out.reshape(f.shape)
 
