@@ -1,5 +1,6 @@
 """Re-timing a flagged run at an even pace: a stalled stretch of a steady walk comes back steady, frames outside the
-run and every frame's bone lengths stay as given; a run grows over the frozen frames next to it, and only over them."""
+run and every frame's bone lengths stay as given; a run grows over the frozen frames next to it, and only over them;
+a run in which the body never stands still is passed over."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +8,8 @@ import pytest
 
 from refiner.core.bone_directions import retimed, to_bone_directions
 from refiner.core.signal import pace
-from refiner.refinement.steps.retime import RetimeConfig, calibrated_stillness, caught_up_freezes, even_pace, still_grown
+from refiner.refinement.steps.retime import (RetimeConfig, calibrated_stillness, caught_up_freezes, even_pace, holding_still,
+                                             still_grown)
 
 
 def _steady(tiny_clip, n=40, speed=0.03):
@@ -101,21 +103,46 @@ def test_the_step_flags_the_grown_frames_for_every_part(tiny_clip):
     from refiner.refinement.steps.retime import RetimeStep
 
     clean, frozen = _frozen(tiny_clip)
-
-    class Seeded:  # a detector sure of frames 18-20 of the first bone only
-        skeleton = "humanact12"
-
-        def scan(self, clips, actions):
-            p = np.zeros(np.shape(clips)[:2] + (24,))
-            p[:, 18:21, 0] = 1.0
-            return None, p
-
-    step = RetimeStep(Seeded(), RetimeConfig(threshold=0.5, margin=1, still_m=0.003))
+    step = RetimeStep(_Seeded(), RetimeConfig(threshold=0.5, margin=1, still_m=0.003))
     _, flagged = step.detect(frozen[None], [None])
     assert np.flatnonzero(flagged[0].any(1)).tolist() == list(range(11, 22))
     assert flagged[0, 11:17].all() and not flagged[0, 17:22, 1:].any()  # seeded frames keep their own parts
-    _, seeded = RetimeStep(Seeded(), InfillConfig(threshold=0.5, margin=1)).detect(frozen[None], [None])
+    _, seeded = RetimeStep(_Seeded(), InfillConfig(threshold=0.5, margin=1)).detect(frozen[None], [None])
     assert np.flatnonzero(seeded[0].any(1)).tolist() == list(range(17, 22))
+
+
+class _Seeded:
+    """A detector sure of frames 18-20 of the first bone only."""
+
+    skeleton = "humanact12"
+
+    def scan(self, clips, actions):
+        p = np.zeros(np.shape(clips)[:2] + (24,))
+        p[:, 18:21, 0] = 1.0
+        return None, p
+
+
+def test_only_runs_holding_a_still_frame_are_kept():
+    frames = np.zeros((2, 12), bool)
+    frames[:, 2:5] = frames[:, 7:10] = True
+    still = np.zeros((2, 12), bool)
+    still[0, 8] = still[1, 0] = True  # the second clip's still frame lies outside its runs
+    out = holding_still(frames, still)
+    assert np.flatnonzero(out[0]).tolist() == [7, 8, 9] and not out[1].any()
+    with pytest.raises(ValueError, match="shape"):
+        holding_still(frames, still[0])
+
+
+def test_a_run_that_never_stops_is_passed_over_and_reported(tiny_clip):
+    from refiner.refinement.steps.retime import RetimeStep
+
+    clean, frozen = _frozen(tiny_clip)
+    step = RetimeStep(_Seeded(), RetimeConfig(threshold=0.5, margin=1, still_m=0.003))
+    assert not step.detect(clean[None], [None])[1].any()
+    assert step.detect(frozen[None], [None])[1].any()
+    out, changes, _ = step.refine(clean[None], [None])
+    np.testing.assert_array_equal(out[0], clean)
+    assert [(c["start"], c["stop"], c["kept"], c.get("passed_over")) for c in changes[0]] == [(17, 22, False, True)]
 
 
 def test_a_freeze_is_found_where_a_jump_catches_it_up(tiny_clip):

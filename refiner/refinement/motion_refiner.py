@@ -203,6 +203,8 @@ _HOW = {"infill": "in-filled from context by the motion model", "retime": "re-ti
 
 
 def _why_not(entry: dict) -> str:
+    if entry.get("passed_over"):
+        return "the body never stands still there, so no time was lost to re-time"
     return f"worse on {', '.join(entry['worse'])}" if entry["worse"] else "not more real"
 
 
@@ -211,6 +213,9 @@ def _change(entry: dict, model: MotionModel) -> dict:
     skel = get_skeleton(model.skeleton)
     names = [skel.joint_names[skel.bones[p, 1]] if p < len(skel.bones) else "root" for p in entry["parts"]]
     how = _HOW.get(entry["step"], entry["step"])
+    if entry.get("passed_over"):
+        return {"step": entry["step"], "start": entry["start"], "stop": entry["stop"], "parts": names, "kept": False,
+                "reason": f"flaw probability {entry['flaw_probability'][0]:.2f}, not kept: {_why_not(entry)}"}
     if "flaw_probability" in entry:
         before, after = entry["flaw_probability"]
         frozen = f"; {entry['still_frames']} frames frozen" if entry.get("still_frames", 0) >= 2 else ""

@@ -101,6 +101,10 @@ class InfillStep:
         """Detect, propose and verify on ``clips (N, T, J, 3)``: the kept clips, each clip's change entries, and the
         flaw ``probability (N, T, P)``; clips with nothing flagged skip the in-fill."""
         prob, flagged = self.detect(clips, actions)
+        return self.repaired(clips, actions, prob, flagged)
+
+    def repaired(self, clips, actions, prob, flagged) -> tuple[np.ndarray, list[list[dict]], np.ndarray]:
+        """Propose and verify the ``flagged (N, T, P)`` parts of ``clips``, as :meth:`refine` returns them."""
         out, changes = np.array(clips, dtype=np.float64), [[] for _ in clips]
         todo = np.flatnonzero(flagged.any((1, 2)))
         if len(todo):

@@ -5,7 +5,9 @@ Generators stall, skip ahead and catch up: the poses are right and their timing 
 motion model's flags (:class:`~refiner.refinement.steps.infill.InfillStep`) and adds the freezes it missed where a
 jump near them catches up the time they lost (:func:`caught_up_freezes`, D29); every run then grows over the frames
 beside it in which the body stands stiller than all but ``still_share`` of clean capture (``still_m``, calibrated on
-clean clips): a freeze is where the lost time went, so it belongs to the run (D27). ``propose`` re-samples the
+clean clips): a freeze is where the lost time went, so it belongs to the run (D27). Only the runs in which the body
+stands still somewhere are kept (:func:`holding_still`, D31): a run that never stops has lost no time, and re-timing
+it would only move a pose flaw or natural motion along its path. ``propose`` re-samples the
 frames of each run, between the kept frames that bound it, at even steps of the body's path length (mean joint
 displacement); every frame keeps its own bone lengths. Chosen over the in-fill on the calibration subjects (D20).
 ``verify`` is the model's (:meth:`InfillStep.verify`), and counts each run's frozen frames for the report.
@@ -24,7 +26,8 @@ from refiner.core.skeletons import get_skeleton
 from refiner.refinement.steps.base import grown, runs
 from refiner.refinement.steps.infill import InfillConfig, InfillStep
 
-__all__ = ["RetimeConfig", "RetimeStep", "even_pace", "still_grown", "caught_up_freezes", "calibrated_stillness"]
+__all__ = ["RetimeConfig", "RetimeStep", "even_pace", "still_grown", "caught_up_freezes", "holding_still",
+           "calibrated_stillness"]
 
 
 @dataclass(frozen=True)
@@ -128,6 +131,20 @@ def caught_up_freezes(joints, config: RetimeConfig, *, speeds=None) -> np.ndarra
     return out.reshape(x.shape[:-2])
 
 
+def holding_still(frames, still) -> np.ndarray:
+    """``frames (..., T)`` bool with only the runs that hold a frame where ``still (..., T)`` bool is True."""
+    f, st = np.asarray(frames, bool), np.asarray(still, bool)
+    if st.shape != f.shape:
+        raise ValueError(f"`still` must have the shape of `frames` {f.shape}; got {st.shape}.")
+    n = f.shape[-1]
+    given, out = f.reshape(-1, n), np.zeros((int(np.prod(f.shape[:-1], dtype=int)), n), bool)
+    st = st.reshape(-1, n)
+    for i in np.flatnonzero(given.any(-1)):
+        for s, e in runs(given[i]):
+            out[i, s:e] = st[i, s:e].any()
+    return out.reshape(f.shape)
+
+
 def calibrated_stillness(clips, *, share: float) -> float:
     """``still_m``: the pace (metres per frame) that only ``share`` of the frames of the clean ``clips`` (each ``(T,
     J, 3)`` metres, T >= 2, real and unseen by the model) stay below."""
@@ -151,7 +168,7 @@ class RetimeStep(InfillStep):
     def __init__(self, model, config: InfillConfig):
         super().__init__(model, config if isinstance(config, RetimeConfig) else RetimeConfig(**asdict(config)))
 
-    def detect(self, clips, actions) -> tuple[np.ndarray, np.ndarray]:
+    def candidates(self, clips, actions) -> tuple[np.ndarray, np.ndarray]:
         """The motion model's flags (:meth:`InfillStep.detect`) and the :func:`caught_up_freezes`, each run grown over
         the still frames next to it (:func:`still_grown`); frames the model did not flag are flagged for every part."""
         prob, flagged = super().detect(clips, actions)
@@ -161,6 +178,37 @@ class RetimeStep(InfillStep):
             grown = still_grown(clips, seeds, self.config.still_m, speeds=speeds)
             flagged |= (grown & ~flagged.any(-1))[..., None]
         return prob, flagged
+
+    def timed(self, clips, flagged) -> np.ndarray:
+        """``flagged (N, T, P)`` with only the runs in which the body stands still (:func:`holding_still`): a run
+        that never stops has lost no time, so re-timing cannot repair it (D31). ``still_m`` 0 keeps every run."""
+        if self.config.still_m <= 0:
+            return flagged
+        frames = flagged.any(-1)
+        todo = np.flatnonzero(frames.any(-1))
+        keep = np.zeros_like(frames)
+        if len(todo):
+            keep[todo] = holding_still(frames[todo], pace(np.asarray(clips)[todo]) < self.config.still_m)
+        return flagged & keep[..., None]
+
+    def detect(self, clips, actions) -> tuple[np.ndarray, np.ndarray]:
+        """The flaw probability and the :meth:`candidates` that are :meth:`timed`."""
+        prob, flagged = self.candidates(clips, actions)
+        return prob, self.timed(clips, flagged)
+
+    def refine(self, clips, actions) -> tuple[np.ndarray, list[list[dict]], np.ndarray]:
+        """:meth:`InfillStep.refine` on the :meth:`detect` runs; the candidates passed over (never still) are
+        reported as not kept."""
+        prob, found = self.candidates(clips, actions)
+        flagged = self.timed(clips, found)
+        out, changes, prob = self.repaired(clips, actions, prob, flagged)
+        passed = found.any(-1) & ~flagged.any(-1)
+        for i in np.flatnonzero(passed.any(-1)):
+            changes[i] = sorted(changes[i] + [
+                {"step": self.name, "start": s, "stop": e, "parts": list(range(found.shape[-1])), "kept": False,
+                 "worse": [], "passed_over": True, "flaw_probability": [round(float(prob[i, s:e].max()), 3)] * 2}
+                for s, e in runs(passed[i])], key=lambda entry: entry["start"])
+        return out, changes, prob
 
     def verify(self, given, proposed, actions, flagged, probability) -> tuple[np.ndarray, list[list[dict]]]:
         """:meth:`InfillStep.verify`; each entry also counts the run's ``still_frames`` (stiller than ``still_m``), so
