@@ -6,17 +6,19 @@ import numpy as np
 import pytest
 
 from refiner.core.skeletons import bone_lengths, get_skeleton, joint_bone_lengths
-from refiner.evaluation import blind_timing_mechanisms
+from refiner.evaluation import blind_gait_mechanisms, blind_timing_mechanisms
+from refiner.evaluation.blind_geometry import bones
 from refiner.evaluation.blind_mechanisms import MECHANISMS
 
 SKEL = get_skeleton("humanact12")
 # mechanisms that keep every frame's bone lengths exactly (sink_into_floor may stretch the legs, joint_jitter
 # adds position noise)
 KEEPS_BONES = {"wrong_limb_pose", "freeze_catch_up", "hover_above_ground", "foot_skate", "stutter", "tempo_drift",
-               "dropped_frames_crawl"}
+               "dropped_frames_crawl", "same_foot_twice", "lagging_limb"}
 GROUND = ["hover_above_ground", "foot_skate", "sink_into_floor", "joint_jitter"]
 TIMING = ["stutter", "tempo_drift", "dropped_frames_crawl"]
-VISIBLE_M = {"joint_jitter": 0.01}  # 1-2 cm RMS noise, the others move a few cm
+GAIT = ["same_foot_twice", "bone_stretch", "lagging_limb"]
+VISIBLE_M = {"joint_jitter": 0.01, "bone_stretch": 0.02}  # 1-2 cm RMS noise; 3-8 % of a limb; the others a few cm
 LEG_BONES = [4, 5, 7, 8]  # bones ending at the knees and ankles (thighs and shins)
 
 
@@ -104,7 +106,7 @@ def _changed_frames(out: np.ndarray, clip: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.real_data
-@pytest.mark.parametrize("name", GROUND + TIMING)
+@pytest.mark.parametrize("name", GROUND + TIMING + GAIT)
 def test_ground_mechanisms_on_real_clips_are_pure_local_and_seeded(name, real_clips):
     """On real clips: float32 of the same shape, input untouched, one window of 8-30 whole frames, seeded."""
     for clip in real_clips:
@@ -214,7 +216,7 @@ def _window_speeds(out: np.ndarray, clip: np.ndarray):
 def test_timing_mechanisms_are_all_in_the_registry():
     assert set(TIMING) == set(blind_timing_mechanisms.MECHANISMS) and set(TIMING) <= set(MECHANISMS)
     assert all(MECHANISMS[k] is blind_timing_mechanisms.MECHANISMS[k] for k in TIMING)
-    assert len(MECHANISMS) == 2 + len(GROUND) + len(TIMING)
+    assert len(MECHANISMS) == 2 + len(GROUND) + len(TIMING) + len(GAIT)
 
 
 @pytest.mark.parametrize("name", TIMING)
@@ -287,3 +289,71 @@ def test_timing_severity_scales_the_warp(name):
         lags = [np.abs(_played_time(MECHANISMS[name](clip, np.random.default_rng(seed), s)) - frames).max()
                 for s in (0.5, 1.0, 2.0)]
         assert lags[0] < lags[1] <= lags[2] + 1e-6 and lags[0] > 0.2
+
+
+# ---- gait and limb mechanisms (same foot twice, bone stretch, lagging limb) on real clips
+
+LEGS = {"left": [4, 7, 10], "right": [5, 8, 11]}
+LIMBS = [[18, 20, 22], [19, 21, 23], LEGS["left"], LEGS["right"]]
+
+
+def test_gait_mechanisms_are_all_in_the_registry():
+    assert set(GAIT) == set(blind_gait_mechanisms.MECHANISMS)
+    assert all(MECHANISMS[k] is blind_gait_mechanisms.MECHANISMS[k] for k in GAIT)
+
+
+@pytest.mark.real_data
+@pytest.mark.parametrize("name", GAIT)
+def test_gait_mechanisms_on_real_clips_keep_the_ends_and_bones_and_show(name, real_clips):
+    """First and last frame exact, some joint moved by over 2 cm, bones kept where promised."""
+    for clip in real_clips:
+        for seed in range(4):
+            out = MECHANISMS[name](clip, np.random.default_rng(seed))
+            assert np.array_equal(out[[0, -1]], clip[[0, -1]])
+            assert np.linalg.norm(out.astype(np.float64) - clip, axis=-1).max() > 0.02
+            err = np.abs(joint_bone_lengths(out, SKEL) - joint_bone_lengths(clip, SKEL)).max()
+            assert err < 1e-5 or name not in KEEPS_BONES
+
+
+def _moved_joints(out: np.ndarray, clip: np.ndarray) -> list:
+    return list(np.flatnonzero(np.abs(out.astype(np.float64) - clip).max((0, 2)) > 1e-6))
+
+
+@pytest.mark.real_data
+def test_same_foot_twice_moves_only_the_legs_below_the_hips(real_clips):
+    """Both legs (the swap) or one (the copy) change; hips, upper body and root stay exactly."""
+    forms = set()
+    for clip in real_clips:
+        for seed in range(8):
+            moved = _moved_joints(MECHANISMS["same_foot_twice"](clip, np.random.default_rng(seed)), clip)
+            assert moved in (sorted(LEGS["left"] + LEGS["right"]), LEGS["left"], LEGS["right"])
+            forms.add(len(moved))
+    assert forms == {3, 6}
+
+
+@pytest.mark.real_data
+def test_bone_stretch_varies_chain_lengths_by_a_few_percent_keeping_directions(real_clips):
+    for clip in real_clips:
+        for seed in range(6):
+            out = MECHANISMS["bone_stretch"](clip, np.random.default_rng(seed)).astype(np.float64)
+            ratio = joint_bone_lengths(out, SKEL)[:, 1:] / joint_bone_lengths(clip, SKEL)[:, 1:]
+            assert 0.02 < np.abs(ratio - 1.0).max() < 0.09  # a few per cent at the peak, no more
+            assert np.abs(np.diff(ratio, axis=0)).max() < 0.65 * np.abs(ratio - 1.0).max()  # a wobble, not a jump
+            assert np.abs(bones(out)[0] - bones(clip)[0]).max() < 1e-5  # every bone keeps its direction
+
+
+@pytest.mark.real_data
+def test_lagging_limb_moves_one_limb_which_shows_earlier_poses(real_clips):
+    """One arm or leg changes; its pose relative to its limb root looks like the clip's a few frames before."""
+    late = 0
+    for clip in real_clips:
+        for seed in range(6):
+            out = MECHANISMS["lagging_limb"](clip, np.random.default_rng(seed)).astype(np.float64)
+            moved = _moved_joints(out, clip)
+            assert moved in LIMBS
+            frames = _changed_frames(out, clip)
+            root = SKEL.parents[moved[0]]
+            rel = lambda x, t: x[t][:, moved] - x[t][:, [root]]  # noqa: E731
+            gaps = [np.linalg.norm(rel(out, frames) - rel(clip, frames - k), axis=-1).mean() for k in range(6)]
+            late += int(np.argmin(gaps) > 0)
+    assert late >= 0.75 * len(real_clips) * 6

@@ -5,7 +5,9 @@ random window of 8-30 frames with smooth edges; the two here keep every frame's 
 ``MECHANISMS`` also holds the ground-contact and jitter ones of :mod:`refiner.evaluation.blind_ground_mechanisms`
 (hover, foot skate, sink, jitter; the last two change some bone lengths, as their docstrings say) and the
 timing ones of :mod:`refiner.evaluation.blind_timing_mechanisms` (stutter, tempo drift, dropped frames with a crawl;
-re-timings that keep every frame's own bone lengths exactly).
+re-timings that keep every frame's own bone lengths exactly) and the gait and limb ones of
+:mod:`refiner.evaluation.blind_gait_mechanisms` (same foot twice and a lagging limb, bones kept exactly; bone stretch,
+which by design does not keep them).
 """
 from __future__ import annotations
 
@@ -13,12 +15,14 @@ import numpy as np
 
 from refiner.evaluation.blind_geometry import (PARENTS as _PARENTS, bones as _bones, rotate as _rotate, slerp as _slerp,
                                                unit as _unit)
-from refiner.evaluation import blind_ground_mechanisms, blind_timing_mechanisms
+from refiner.evaluation import blind_gait_mechanisms, blind_ground_mechanisms, blind_timing_mechanisms
+from refiner.evaluation.blind_gait_mechanisms import bone_stretch, lagging_limb, same_foot_twice
 from refiner.evaluation.blind_ground_mechanisms import foot_skate, hover_above_ground, joint_jitter, sink_into_floor
 from refiner.evaluation.blind_timing_mechanisms import dropped_frames_crawl, stutter, tempo_drift
 
 __all__ = ["MECHANISMS", "wrong_limb_pose", "freeze_catch_up", "hover_above_ground", "foot_skate", "sink_into_floor",
-           "joint_jitter", "stutter", "tempo_drift", "dropped_frames_crawl"]
+           "joint_jitter", "stutter", "tempo_drift", "dropped_frames_crawl", "same_foot_twice", "bone_stretch",
+           "lagging_limb"]
 
 # limb name -> (pivot joint, joints moved with it, torso frame: lateral pair, up pair)
 _LIMBS = {
@@ -164,4 +168,5 @@ def freeze_catch_up(clip: np.ndarray, rng: np.random.Generator, severity: float 
 
 
 MECHANISMS = {"wrong_limb_pose": wrong_limb_pose, "freeze_catch_up": freeze_catch_up,
-              **blind_ground_mechanisms.MECHANISMS, **blind_timing_mechanisms.MECHANISMS}
+              **blind_ground_mechanisms.MECHANISMS, **blind_timing_mechanisms.MECHANISMS,
+              **blind_gait_mechanisms.MECHANISMS}
