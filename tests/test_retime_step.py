@@ -8,8 +8,8 @@ import pytest
 
 from refiner.core.bone_directions import retimed, to_bone_directions
 from refiner.core.signal import pace
-from refiner.refinement.steps.retime import (RetimeConfig, calibrated_stillness, caught_up_freezes, even_pace, holding_still,
-                                             still_grown)
+from refiner.refinement.steps.retime import (RetimeConfig, calibrated_stillness, caught_up_freezes, even_pace,
+                                             holding_still, still_grown)
 
 
 def _steady(tiny_clip, n=40, speed=0.03):

@@ -205,8 +205,9 @@ class RetimeStep(InfillStep):
         passed = found.any(-1) & ~flagged.any(-1)
         for i in np.flatnonzero(passed.any(-1)):
             changes[i] = sorted(changes[i] + [
-                {"step": self.name, "start": s, "stop": e, "parts": list(range(found.shape[-1])), "kept": False,
-                 "worse": [], "passed_over": True, "flaw_probability": [round(float(prob[i, s:e].max()), 3)] * 2}
+                {"step": self.name, "start": s, "stop": e, "parts": np.flatnonzero(found[i, s:e].any(0)).tolist(),
+                 "kept": False, "worse": [], "passed_over": True,
+                 "flaw_probability": [round(float(prob[i, s:e].max()), 3)] * 2}
                 for s, e in runs(passed[i])], key=lambda entry: entry["start"])
         return out, changes, prob
 
