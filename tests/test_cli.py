@@ -83,6 +83,8 @@ def test_bench_refiner_and_speed_quick(tmp_path, humanact12):
     cpu = speed["devices"][0]
     assert cpu["device"] == "cpu" and 0 < cpu["median_ms"] <= cpu["p90_ms"]
     assert cpu["clips_per_s"] > 0 and cpu["peak_mib"] > 0
+    assert [r["frames"] for r in speed["lengths"]] == [60, 240, 960, 3840]
+    assert all(r["us_per_frame"] == pytest.approx(1000 * r["median_ms"] / r["frames"]) for r in speed["lengths"])
     assert f"| cpu | {cpu['name']} | {cpu['median_ms']:.3f} | {cpu['p90_ms']:.3f} |" in (
         tmp_path / "speed" / "REPORT.md").read_text()
 

@@ -122,6 +122,9 @@ def _measured(h: dict, n: dict, g: dict, sp: dict, co: dict) -> str:
          "; ".join(f"{k} {a[0]:.3f} ± {a[1]:.3f} -> {b[0]:.3f} ± {b[1]:.3f}" for k, a, b in fid), "not worse"),
         (f"speed, 60 frames: batch 1 / batch {sp['batch']} (`bench speed`)",
          f"{speed['median_ms']:.1f} ms / {speed['clips_per_s']:.0f} clips/s", "<= 15 ms / >= 500 clips/s"),
+        ("cost by clip length, batch 1, µs per frame (`bench speed`)",
+         ", ".join(f"{r['frames']} frames {r['us_per_frame']:.0f}" for r in sp.get("lengths", [])) or "not measured",
+         "linear in clip length"),
         (f"corpus, {co['clips']} clips in {co['shards']} shards, clips/s (`bench corpus`)", corpus, ""),
     ]
     return "\n".join(["| figure (command) | value | target (issue 44) |", "|---|---|---|",

@@ -100,6 +100,13 @@ def _speed_device(d: dict) -> str:
     return f"  {d['device']}: median {d['median_ms']:.1f} ms per 60-frame clip"
 
 
+def _speed_lengths(rows: list) -> list:
+    if not rows:
+        return []
+    return ["", "Cost by clip length (batch 1, one clip played back and forth):", "",
+            markdown_table(["frames", "ms / clip", "µs / frame"], [[r["frames"], r["median_ms"], r["us_per_frame"]] for r in rows])]
+
+
 def _speed(rec: dict) -> str:
     rows = [[d["device"], d["name"], d["median_ms"], d["p90_ms"], d["clips_per_s"],
              f"{d['peak_mib']:.0f} MiB ({d['peak_of']})"] for d in rec["devices"]]
@@ -108,6 +115,7 @@ def _speed(rec: dict) -> str:
         f"## Speed ({rec['clips']} held-out 60-frame clips; paper: 0.017 s per clip, 6.23 M parameters)", "",
         markdown_table(["device", "", "median ms / clip (batch 1)", "p90 ms", f"clips / s (batch of {rec['batch']})",
                         "peak memory"], rows),
+        *_speed_lengths(rec.get("lengths", [])),
         "", "Parameters: " + _parameters(rec["parameters"]) + ".",
         "" if cuda else "The default refiner's motion model runs on the CPU.",
     ])

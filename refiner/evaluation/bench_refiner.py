@@ -10,7 +10,8 @@ part and total, the default refiner's), (a) ``real_mpjpe_change_cm`` and ``real_
 anchors), (d) ``latency`` (``clips``, ``threads``, ``median_ms``, ``p90_ms``) and ``anchor_quality_auc`` (the concepts
 method's anchor scores, per flaw family: ``pairs``, ROC AUC of the ``pose`` mixture and of the ``encoder``-feature
 GMM). ``speed.json``: ``clips``, ``batch``, ``devices`` (per device: ``name``, ``median_ms``, ``p90_ms``,
-``clips_per_s``, ``peak_mib``, ``peak_of``) and ``parameters``.
+``clips_per_s``, ``peak_mib``, ``peak_of``), ``lengths`` (per clip length in frames, batch 1: ``frames``, ``median_ms``,
+``us_per_frame``) and ``parameters``.
 """
 from __future__ import annotations
 
@@ -130,6 +131,24 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: 
     return write_record(out, "refiner", rec)
 
 
+#: Clip lengths (frames) timed at batch 1, to show the cost grows linearly with length.
+SPEED_LENGTHS = (60, 240, 960, 3840)
+
+
+def _length_row(model, clip, n_frames: int, *, repeats: int) -> dict:
+    """Median time to refine one clip of ``n_frames``, made by playing ``clip (T, J, 3)`` back and forth (no jumps)."""
+    back_and_forth = np.concatenate([clip, clip[-2:0:-1]])
+    long = np.resize(back_and_forth, (n_frames,) + clip.shape[1:])
+    model.refine(long)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        model.refine(long)
+        times.append(time.perf_counter() - t0)
+    ms = 1000 * float(np.median(times))
+    return {"frames": n_frames, "median_ms": ms, "us_per_frame": 1000 * ms / n_frames}
+
+
 def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
                 progress: Progress | None = None) -> dict:
     """Refine latency (batch 1) and throughput (large batches), peak memory and parameters of the default refiner.
@@ -161,6 +180,7 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Pa
         t0 = time.perf_counter()
         model.refine(batch)
         runs.append(time.perf_counter() - t0)
+    rec["lengths"] = [_length_row(model, clips[0], n, repeats=2 if quick else 5) for n in SPEED_LENGTHS]
     threads = model.threads or torch.get_num_threads()
     rec["devices"].append({
         "device": "cpu", "name": f"{threads} / {threads} threads (batch 1 / {batch_size})",
