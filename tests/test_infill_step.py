@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from refiner.core.skeletons import bone_lengths
+from refiner.core.skeletons import bone_lengths, get_skeleton
 from refiner.refinement.motion_model import MotionModel, joints_from_features, motion_features
 from refiner.refinement.networks.motion_net import MotionNet, MotionNetConfig
 from refiner.refinement.steps.base import dilated, harms, runs, window_figures
@@ -72,7 +72,7 @@ def test_verify_refuses_a_change_that_adds_jerk(tiny_model, rng):
     x = np.broadcast_to(rng.normal(size=(1, 24, 3)) * 0.3, (30, 24, 3)) + 0.05 * t
     noisy = x + rng.normal(size=x.shape) * 0.03 * ((t > 0.3) & (t < 0.6))
     assert "jerk" in harms(window_figures(x, 9, 18, "humanact12", 0.0), window_figures(noisy, 9, 18, "humanact12", 0.0),
-                           jerk_share=0.05, slack_m=0.01)
+                           jerk_share=0.05, ground_tolerance_m=0.01)
     step = InfillStep(tiny_model, InfillConfig(threshold=0.5))
     flagged = np.zeros((1, 30, 24), bool)
     flagged[0, 9:18] = True
@@ -80,3 +80,25 @@ def test_verify_refuses_a_change_that_adds_jerk(tiny_model, rng):
     kept, changes = step.verify(x[None], noisy[None], [None], flagged, prob)
     np.testing.assert_array_equal(kept, x[None])
     assert changes[0][0]["kept"] is False and "jerk" in changes[0][0]["worse"]
+
+
+def test_verification_refuses_what_the_no_harm_suite_counts_as_worse():
+    from refiner.evaluation.bench_noharm import TOLERANCES
+    tol = {name: value for name, _, value in TOLERANCES}
+    config = InfillConfig(threshold=0.5)
+    assert config.jerk_share == tol["jerk"] and config.slide_pairs == 0 and tol["foot_skating"] < 1e-6
+    assert config.ground_tolerance_m == pytest.approx(tol["penetration_cm"] / 100) == tol["floating_cm"] / 100
+
+
+def test_penetration_is_worse_only_beyond_the_tolerance_per_frame(rng):
+    x = np.broadcast_to(rng.normal(size=(1, 24, 3)) * 0.3, (30, 24, 3)).copy()
+    from refiner.core.contact import foot_joints, heights
+    ground = float(heights(x[:, list(foot_joints("humanact12"))], "humanact12").min())
+    figures = window_figures(x, 9, 18, "humanact12", ground)
+    assert figures.penetration == 0.0
+    for depth, worse in ((0.0003, False), (0.002, True)):
+        sunk = x.copy()
+        sunk[12:15] -= 5 * depth * get_skeleton("humanact12").up_vector  # 3 of the window's 15 frames: a mean of depth
+        after = window_figures(sunk, 9, 18, "humanact12", ground)
+        assert after.penetration == pytest.approx(figures.penetration + depth, abs=1e-9)
+        assert ("penetration" in harms(figures, after, jerk_share=1e9, ground_tolerance_m=5e-4)) is worse

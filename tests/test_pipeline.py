@@ -210,7 +210,8 @@ def test_default_refiner_keeps_unflagged_frames_and_reports_each_change(humanact
     from refiner.core.skeletons import convert
 
     clips = [m for m in humanact12.split("test").motions if m.n_frames >= 40][:40:5]
-    forced = MotionRefiner.pretrained(skeleton, threshold=0.0, still_m=0.0, min_gain=-1.0, jerk_share=1e9, slack_m=1e9)
+    forced = MotionRefiner.pretrained(skeleton, threshold=0.0, still_m=0.0, min_gain=-1.0, jerk_share=1e9,
+                                      ground_tolerance_m=1e9, slide_pairs=1e9)
     assert forced.skeleton == skeleton and forced.method == "motion" and forced.action_names
     for m in clips:
         x = (m.joints if skeleton == "humanact12" else convert(m.joints, "humanact12", skeleton)).astype(np.float32)

@@ -50,7 +50,7 @@ def dilated(mask, before: int, after: int | None = None) -> np.ndarray:
 class WindowFigures:
     """Physical figures of a window of a clip: mean joint jerk (m/frame³), foot slide (frame pairs in which a foot
     within ``contact_m`` of the ground moves faster than ``skate_m`` horizontally, as GMD's foot skating counts them),
-    penetration and floating of the lowest foot (metres summed over frames)."""
+    penetration and floating of the lowest foot (metres, mean over the window's frames, as the no-harm suite has them)."""
 
     jerk: float
     slide: float
@@ -72,16 +72,20 @@ def window_figures(joints, start: int, stop: int, skeleton, ground: float, conta
     horizontal = np.linalg.norm(step - (step @ up)[..., None] * up, axis=-1)
     on_ground = (h[1:] < contact_m) & (h[:-1] < contact_m) & (horizontal > skate_m)
     low = h.min(1)
-    return WindowFigures(jerk, float(on_ground.sum()), float(np.clip(-low, 0, None).sum()),
-                         float(np.clip(low - contact_m, 0, None).sum()))
+    return WindowFigures(jerk, float(on_ground.sum()), float(np.clip(-low, 0, None).mean()),
+                         float(np.clip(low - contact_m, 0, None).mean()))
 
 
-def harms(before: WindowFigures, after: WindowFigures, *, jerk_share: float, slack_m: float) -> list[str]:
-    """The figures ``after`` is worse on: jerk up by more than ``jerk_share``, the others up by more than ``slack_m``."""
+def harms(before: WindowFigures, after: WindowFigures, *, jerk_share: float, ground_tolerance_m: float,
+          slide_pairs: float = 0) -> list[str]:
+    """The figures ``after`` is worse on: jerk up by more than ``jerk_share``, foot slide by more than ``slide_pairs``,
+    penetration and floating by more than ``ground_tolerance_m``."""
     out = []
     if after.jerk > before.jerk * (1 + jerk_share) + 1e-6:
         out.append("jerk")
-    for name in ("slide", "penetration", "floating"):
-        if getattr(after, name) > getattr(before, name) + slack_m:
+    if after.slide > before.slide + slide_pairs:
+        out.append("slide")
+    for name in ("penetration", "floating"):
+        if getattr(after, name) > getattr(before, name) + ground_tolerance_m:
             out.append(name)
     return out

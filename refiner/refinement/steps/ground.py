@@ -40,7 +40,8 @@ class GroundConfig:
     into the body's offset (what is repaired); an airborne run whose root decelerates by ``flight_share`` of gravity
     is a jump and is left alone, and so is a run whose root and head do not follow its gap with a slope of
     ``follow_share`` (a limb or a crouch, not a body moved); ``bandwidth_m`` is how far off the floor a frame still
-    pulls the plane fit; ``jerk_share`` as in verification."""
+    pulls the plane fit; ``jerk_share`` and ``ground_tolerance_m`` as in
+    :class:`~refiner.refinement.steps.infill.InfillConfig`."""
 
     float_m: float = 0.05
     least_float_m: float = 0.04
@@ -51,6 +52,7 @@ class GroundConfig:
     follow_share: float = 0.5
     bandwidth_m: float = 0.02
     jerk_share: float = 0.05
+    ground_tolerance_m: float = 0.0005
 
 
 def _departure(v, s: int, e: int) -> np.ndarray:
@@ -170,7 +172,8 @@ class GroundStep:
                 for s, e in found:
                     fb = window_figures(before, s, e, self.skeleton, floor)
                     fa = window_figures(after, s, e, self.skeleton, floor)
-                    worse = harms(fb, fa, jerk_share=self.config.jerk_share, slack_m=0.0)
+                    worse = harms(fb, fa, jerk_share=self.config.jerk_share,
+                                  ground_tolerance_m=self.config.ground_tolerance_m)
                     trial = out[i].copy()
                     trial[s:e] = proposed[s:e]
                     if _clip_floating(trial, self.skeleton, lowest) > _clip_floating(out[i], self.skeleton, lowest) + 1e-9:
@@ -225,7 +228,8 @@ class GlideConfig:
     planted foot is the slower foot within ``contact_m`` of the floor, its steps despiked over ``despike_frames`` and
     its drift taken against its running median over ``course_frames`` (what the body's own travel looks like); a run
     counts where the root and head follow the offset with a slope of ``follow_share`` (the body slid, not a foot);
-    ``min_run``, ``edge_share``, ``smooth_frames`` and ``jerk_share`` as in :class:`GroundConfig`."""
+    ``min_run``, ``edge_share``, ``smooth_frames``, ``jerk_share`` and ``ground_tolerance_m`` as in
+    :class:`GroundConfig`."""
 
     glide_m: float = 0.08
     follow_share: float = 0.5
@@ -237,6 +241,7 @@ class GlideConfig:
     smooth_frames: float = 2.0
     bandwidth_m: float = 0.02
     jerk_share: float = 0.05
+    ground_tolerance_m: float = 0.0005
 
 
 def glide_offset(joints, skeleton, config: GlideConfig, plane=None) -> np.ndarray:
@@ -298,7 +303,8 @@ class GlideStep:
                     continue
                 trial[s:e] -= (d @ plane_basis(skel))[:, None, :]
                 fb, fa = window_figures(out[i], s, e, skel, lowest), window_figures(trial, s, e, skel, lowest)
-                worse = harms(fb, fa, jerk_share=c.jerk_share, slack_m=0.0) + ([] if fa.slide < fb.slide else ["no less skating"])
+                worse = harms(fb, fa, jerk_share=c.jerk_share, ground_tolerance_m=c.ground_tolerance_m)
+                worse += [] if fa.slide < fb.slide else ["no less skating"]
                 if worse:
                     trial[s:e] = out[i, s:e]
                 changes[i].append({"step": self.name, "start": s, "stop": e, "parts": [root], "kept": not worse,

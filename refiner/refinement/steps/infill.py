@@ -23,13 +23,16 @@ __all__ = ["InfillConfig", "InfillStep", "flagged_parts", "clip_scores"]
 
 @dataclass(frozen=True)
 class InfillConfig:
-    """Options of :class:`InfillStep`; ``threshold`` is calibrated (the manifest's), the others are choices."""
+    """Options of :class:`InfillStep`; ``threshold`` is calibrated (the manifest's), the others are choices.
+    ``jerk_share``, ``slide_pairs`` and ``ground_tolerance_m`` (metres per frame of the window, penetration and
+    floating) are the no-harm suite's own tolerances: what it counts as worse, the verification refuses."""
 
     threshold: float
     min_run: int = 2
     margin: int = 2
     jerk_share: float = 0.05
-    slack_m: float = 0.0
+    ground_tolerance_m: float = 0.0005
+    slide_pairs: float = 0
     min_gain: float = 0.0
 
 
@@ -128,7 +131,8 @@ class InfillStep:
             for s, e in runs(flagged[i].any(1)):
                 before_p, after_p = float(probability[i, s:e].max()), float(after[i, s:e].max())
                 worse = harms(window_figures(given[i], s, e, skel, ground), window_figures(proposed[i], s, e, skel, ground),
-                              jerk_share=self.config.jerk_share, slack_m=self.config.slack_m)
+                              jerk_share=self.config.jerk_share,
+                              ground_tolerance_m=self.config.ground_tolerance_m, slide_pairs=self.config.slide_pairs)
                 kept = after_p < before_p - self.config.min_gain and not worse
                 parts = np.flatnonzero(flagged[i, s:e].any(0) | self.moves_whole_body).tolist()
                 entries.append({"step": self.name, "start": s, "stop": e, "parts": parts, "kept": kept,
