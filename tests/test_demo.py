@@ -126,6 +126,17 @@ def test_summary_row_says_total_for_counts_and_mean_for_confidence():
     assert last.startswith("| **total; mean confidence** | 59/120 | 2/120 | 0.400 | 0.400 |")
 
 
+def test_a_demo_that_changed_nothing_says_why():
+    from refiner.cli.demo import DemoRow, unchanged_note
+
+    def row(changed, flagged):
+        return DemoRow(action=0, action_name="walk", frames=60, frames_changed=changed, frames_flagged=flagged,
+                       confidence_before=0.5, confidence_after=0.5, predicted_before="walk", predicted_after="walk")
+    assert unchanged_note([row(3, 5), row(0, 0)]) == ""
+    assert "no frame was flagged" in unchanged_note([row(0, 0), row(0, 0)])
+    assert "7 flagged frames were not verified as better" in unchanged_note([row(0, 7), row(0, 0)])
+
+
 @pytest.mark.real_data
 def test_demo_refuses_to_overwrite_its_files_without_force(demo_run, tmp_path, capsys):
     """Like `refine`: existing outputs are never replaced without --force, and nothing is written first."""

@@ -30,8 +30,8 @@ from refiner.io.datasets import HUMANACT12_ACTIONS
 from refiner.plugins.manager import get_plugin_manager
 from refiner.refinement.refined_generator import RefinedGenerator
 
-__all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table", "demo_arguments",
-           "demo_run"]
+__all__ = ["GIF_DPI", "GIF_PANEL_PX", "DemoRow", "DemoResult", "run_demo", "format_table", "unchanged_note",
+           "demo_arguments", "demo_run"]
 
 
 def demo_arguments(p: argparse.ArgumentParser) -> None:
@@ -58,6 +58,8 @@ def demo_run(args: argparse.Namespace) -> int:
     result = run_demo(args.out, generator=args.generator, actions=actions, quick=args.quick, random_state=args.seed,
                       mp4=False if args.no_mp4 else None, progress=True, gif_size=args.gif_size, overwrite=args.force)
     print(format_table(result.rows))
+    if note := unchanged_note(result.rows):
+        print(note)
     print("confidence: the HumanAct12 recogniser's probability of the sampled action (hidden state fixed); "
           "frames flagged: frames the refiner's detector flagged (a flagged run is changed only where verified).")
     n_files = sum(len(r.files) for r in result.rows) + len(result.files)
@@ -241,6 +243,16 @@ def run_demo(
                                     + format_table(rows) + "\n")
     (out / "summary.json").write_text(json.dumps(result.to_dict(), indent=1) + "\n")
     return result
+
+
+def unchanged_note(rows: Sequence[DemoRow]) -> str:
+    """What to tell a user whose demo changed no frame (empty when some frame changed)."""
+    if not rows or any(r.frames_changed for r in rows):
+        return ""
+    flagged = sum(r.frames_flagged for r in rows)
+    why = "no frame was flagged" if not flagged else f"{flagged} flagged frames were not verified as better"
+    return (f"No frame was changed: {why}. The refiner leaves as given what it cannot show to be better; other "
+            "clips (--seed, --generator) may hold flaws it repairs.")
 
 
 def format_table(rows: Sequence[DemoRow]) -> str:
