@@ -134,7 +134,8 @@ def test_a_demo_that_changed_nothing_says_why():
                        confidence_before=0.5, confidence_after=0.5, predicted_before="walk", predicted_after="walk")
     assert unchanged_note([row(3, 5), row(0, 0)]) == ""
     assert "no frame was flagged" in unchanged_note([row(0, 0), row(0, 0)])
-    assert "7 flagged frames were not verified as better" in unchanged_note([row(0, 7), row(0, 0)])
+    assert "7 flagged frames left as given" in unchanged_note([row(0, 7), row(0, 0)])
+    assert "1 flagged frame left as given" in unchanged_note([row(0, 1)])
 
 
 @pytest.mark.real_data

@@ -72,7 +72,7 @@ def test_verify_refuses_a_change_that_adds_jerk(tiny_model, rng):
     x = np.broadcast_to(rng.normal(size=(1, 24, 3)) * 0.3, (30, 24, 3)) + 0.05 * t
     noisy = x + rng.normal(size=x.shape) * 0.03 * ((t > 0.3) & (t < 0.6))
     assert "jerk" in harms(window_figures(x, 9, 18, "humanact12", 0.0), window_figures(noisy, 9, 18, "humanact12", 0.0),
-                           jerk_share=0.05, ground_tolerance_m=0.01)
+                           jerk_share=0.05, ground_tolerance_m=0.01, slide_pairs=0)
     step = InfillStep(tiny_model, InfillConfig(threshold=0.5))
     flagged = np.zeros((1, 30, 24), bool)
     flagged[0, 9:18] = True
@@ -82,12 +82,13 @@ def test_verify_refuses_a_change_that_adds_jerk(tiny_model, rng):
     assert changes[0][0]["kept"] is False and "jerk" in changes[0][0]["worse"]
 
 
-def test_verification_refuses_what_the_no_harm_suite_counts_as_worse():
+def test_every_step_takes_the_no_harm_suites_tolerances():
     from refiner.evaluation.bench_noharm import TOLERANCES
     tol = {name: value for name, _, value in TOLERANCES}
-    config = InfillConfig(threshold=0.5)
-    assert config.jerk_share == tol["jerk"] and config.slide_pairs == 0 and tol["foot_skating"] < 1e-6
-    assert config.ground_tolerance_m == pytest.approx(tol["penetration_cm"] / 100) == tol["floating_cm"] / 100
+    from refiner.refinement.steps.ground import GlideConfig, GroundConfig
+    for config in (InfillConfig(threshold=0.5), GroundConfig(), GlideConfig()):
+        assert config.jerk_share == tol["jerk"] and config.slide_pairs == 0 and tol["foot_skating"] < 1e-6
+        assert config.ground_tolerance_m == pytest.approx(tol["penetration_cm"] / 100) == tol["floating_cm"] / 100
 
 
 def test_penetration_is_worse_only_beyond_the_tolerance_per_frame(rng):
@@ -101,4 +102,4 @@ def test_penetration_is_worse_only_beyond_the_tolerance_per_frame(rng):
         sunk[12:15] -= 5 * depth * get_skeleton("humanact12").up_vector  # 3 of the window's 15 frames: a mean of depth
         after = window_figures(sunk, 9, 18, "humanact12", ground)
         assert after.penetration == pytest.approx(figures.penetration + depth, abs=1e-9)
-        assert ("penetration" in harms(figures, after, jerk_share=1e9, ground_tolerance_m=5e-4)) is worse
+        assert ("penetration" in harms(figures, after, jerk_share=1e9, ground_tolerance_m=5e-4, slide_pairs=0)) is worse

@@ -15,8 +15,8 @@ from refiner.refinement.pipeline import Refiner
 def forced():
     """The default refiner with every gate off: it flags every frame but the first and last (which anchor the in-fill)
     and keeps every change, whatever the weights, so a clip comes back with changed and unchanged frames."""
-    return MotionRefiner.pretrained("humanact12", threshold=0.0, min_gain=-1.0, jerk_share=1e9, ground_tolerance_m=1e9,
-                                    slide_pairs=1e9)
+    return MotionRefiner.pretrained("humanact12", threshold=0.0, still_m=0.0, min_gain=-1.0, jerk_share=1e9,
+                                    ground_tolerance_m=1e9, slide_pairs=1e9)
 
 
 @pytest.fixture(scope="module")

@@ -250,7 +250,9 @@ def unchanged_note(rows: Sequence[DemoRow]) -> str:
     if not rows or any(r.frames_changed for r in rows):
         return ""
     flagged = sum(r.frames_flagged for r in rows)
-    why = "no frame was flagged" if not flagged else f"{flagged} flagged frames were not verified as better"
+    why = "no frame was flagged" if not flagged else (
+        f"{flagged} flagged frame{'s' * (flagged != 1)} left as given (refused by verification, or passed over where "
+        "the body never stands still)")
     return (f"No frame was changed: {why}. The refiner leaves as given what it cannot show to be better; other "
             "clips (--seed, --generator) may hold flaws it repairs.")
 

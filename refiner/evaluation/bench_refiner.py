@@ -136,7 +136,8 @@ SPEED_LENGTHS = (60, 240, 960, 3840)
 
 
 def _length_row(model, clip, n_frames: int, *, repeats: int) -> dict:
-    """Median time to refine one clip of ``n_frames``, made by playing ``clip (T, J, 3)`` back and forth (no jumps)."""
+    """Median time to refine one clip of ``n_frames``, made by playing ``clip (T, J, 3)`` back and forth (no jumps);
+    a clip with nothing flagged times detection, one with flagged runs adds their repair."""
     back_and_forth = np.concatenate([clip, clip[-2:0:-1]])
     long = np.resize(back_and_forth, (n_frames,) + clip.shape[1:])
     model.refine(long)
@@ -151,7 +152,8 @@ def _length_row(model, clip, n_frames: int, *, repeats: int) -> dict:
 
 def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Path | None = None,
                 progress: Progress | None = None) -> dict:
-    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters of the default refiner.
+    """Refine latency (batch 1) and throughput (large batches), peak memory and parameters of the default refiner,
+    and the latency of one clip at each of :data:`SPEED_LENGTHS` frames (after the peak memory is read).
 
     The motion model runs on the CPU (``MotionRefiner`` has no device option), so there is one row, ``cpu``.
     ``quick``: 8 clips and batches of 8 (else 64 and 256). Progress event ``"device"``: each row of ``devices`` as it
@@ -180,7 +182,6 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Pa
         t0 = time.perf_counter()
         model.refine(batch)
         runs.append(time.perf_counter() - t0)
-    rec["lengths"] = [_length_row(model, clips[0], n, repeats=2 if quick else 5) for n in SPEED_LENGTHS]
     threads = model.threads or torch.get_num_threads()
     rec["devices"].append({
         "device": "cpu", "name": f"{threads} / {threads} threads (batch 1 / {batch_size})",
@@ -188,5 +189,6 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Pa
         "clips_per_s": len(batch) / float(np.median(runs)),
         "peak_mib": float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024), "peak_of": "process RSS"})
     progress("device", rec["devices"][-1])
+    rec["lengths"] = [_length_row(model, clips[0], n, repeats=2 if quick else 5) for n in SPEED_LENGTHS]
     rec["parameters"] = motion_parameters(model)
     return write_record(out, "speed", rec)

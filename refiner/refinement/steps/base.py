@@ -50,7 +50,8 @@ def dilated(mask, before: int, after: int | None = None) -> np.ndarray:
 class WindowFigures:
     """Physical figures of a window of a clip: mean joint jerk (m/frame³), foot slide (frame pairs in which a foot
     within ``contact_m`` of the ground moves faster than ``skate_m`` horizontally, as GMD's foot skating counts them),
-    penetration and floating of the lowest foot (metres, mean over the window's frames, as the no-harm suite has them)."""
+    penetration of the lowest foot below ``ground`` and its floating beyond ``contact_m`` (metres, means over the
+    window's frames, so that a tolerance per frame can be put on them)."""
 
     jerk: float
     slide: float
@@ -77,7 +78,7 @@ def window_figures(joints, start: int, stop: int, skeleton, ground: float, conta
 
 
 def harms(before: WindowFigures, after: WindowFigures, *, jerk_share: float, ground_tolerance_m: float,
-          slide_pairs: float = 0) -> list[str]:
+          slide_pairs: float) -> list[str]:
     """The figures ``after`` is worse on: jerk up by more than ``jerk_share``, foot slide by more than ``slide_pairs``,
     penetration and floating by more than ``ground_tolerance_m``."""
     out = []

@@ -6,8 +6,9 @@ under the lowest contact joint of each frame (the camera of a capture, or a gene
 level), then flags runs where the body's offset from it (the gap, smoothed) stays above ``float_m`` while the root
 and head rise with it (the body moved, not a limb or a crouch) and the root does not decelerate as a jump does.
 ``propose`` lowers the whole body along the vertical by the run's offset, so every pose, bone and horizontal path is
-kept. ``verify`` keeps a run only where floating falls and jerk, foot skating and penetration do not rise, over the
-levelled floor and over the given clip's lowest contact. ``float_m`` is calibrated on clean clips
+kept. ``verify`` keeps a run only where floating falls and jerk, foot skating and penetration do not rise beyond
+:func:`~refiner.refinement.steps.base.harms`' tolerances over the levelled floor, nor floating over the given clip's
+lowest contact. ``float_m`` is calibrated on clean clips
 (:func:`calibrated_ground`) and lives in the weights' manifest. A body sunk below its floor is not raised: by the
 floor clips are judged on (their lowest contact) that always makes them float more (``docs/decisions.md`` D24).
 """
@@ -40,7 +41,7 @@ class GroundConfig:
     into the body's offset (what is repaired); an airborne run whose root decelerates by ``flight_share`` of gravity
     is a jump and is left alone, and so is a run whose root and head do not follow its gap with a slope of
     ``follow_share`` (a limb or a crouch, not a body moved); ``bandwidth_m`` is how far off the floor a frame still
-    pulls the plane fit; ``jerk_share`` and ``ground_tolerance_m`` as in
+    pulls the plane fit; ``jerk_share``, ``ground_tolerance_m`` and ``slide_pairs`` as in
     :class:`~refiner.refinement.steps.infill.InfillConfig`."""
 
     float_m: float = 0.05
@@ -53,6 +54,7 @@ class GroundConfig:
     bandwidth_m: float = 0.02
     jerk_share: float = 0.05
     ground_tolerance_m: float = 0.0005
+    slide_pairs: float = 0
 
 
 def _departure(v, s: int, e: int) -> np.ndarray:
@@ -155,9 +157,9 @@ class GroundStep:
 
     def refine(self, clips, actions=None) -> tuple[np.ndarray, list[list[dict]], None]:
         """Detect, propose and verify every clip of ``clips (N, T, J, 3)``: the kept clips and each clip's entries.
-        A run is kept where floating over the levelled floor falls, jerk, foot skating and penetration do not rise,
-        and the clip's floating over the given clip's lowest contact (the floor clips are usually judged on) does not
-        rise either."""
+        A run is kept where floating over the levelled floor falls, jerk, foot skating and penetration do not rise
+        beyond :func:`~refiner.refinement.steps.base.harms`' tolerances, and the clip's floating over the given clip's
+        lowest contact (the floor clips are usually judged on) does not rise at all."""
         out, changes = np.array(clips, dtype=np.float64), []
         root = len(get_skeleton(self.skeleton).bones)
         floor = -self.config.bandwidth_m  # the fitted floor is known to within its bandwidth
@@ -172,8 +174,9 @@ class GroundStep:
                 for s, e in found:
                     fb = window_figures(before, s, e, self.skeleton, floor)
                     fa = window_figures(after, s, e, self.skeleton, floor)
-                    worse = harms(fb, fa, jerk_share=self.config.jerk_share,
-                                  ground_tolerance_m=self.config.ground_tolerance_m)
+                    c = self.config
+                    worse = harms(fb, fa, jerk_share=c.jerk_share, ground_tolerance_m=c.ground_tolerance_m,
+                                  slide_pairs=c.slide_pairs)
                     trial = out[i].copy()
                     trial[s:e] = proposed[s:e]
                     if _clip_floating(trial, self.skeleton, lowest) > _clip_floating(out[i], self.skeleton, lowest) + 1e-9:
@@ -228,7 +231,7 @@ class GlideConfig:
     planted foot is the slower foot within ``contact_m`` of the floor, its steps despiked over ``despike_frames`` and
     its drift taken against its running median over ``course_frames`` (what the body's own travel looks like); a run
     counts where the root and head follow the offset with a slope of ``follow_share`` (the body slid, not a foot);
-    ``min_run``, ``edge_share``, ``smooth_frames``, ``jerk_share`` and ``ground_tolerance_m`` as in
+    ``min_run``, ``edge_share``, ``smooth_frames``, ``jerk_share``, ``ground_tolerance_m`` and ``slide_pairs`` as in
     :class:`GroundConfig`."""
 
     glide_m: float = 0.08
@@ -242,6 +245,7 @@ class GlideConfig:
     bandwidth_m: float = 0.02
     jerk_share: float = 0.05
     ground_tolerance_m: float = 0.0005
+    slide_pairs: float = 0
 
 
 def glide_offset(joints, skeleton, config: GlideConfig, plane=None) -> np.ndarray:
@@ -276,8 +280,8 @@ class GlideStep:
     ``detect``: :func:`glide_offset` above the calibrated ``glide_m``, the root and head sliding with it. ``propose``:
     the whole body moved back along the floor by the run's offset above the line joining its bounding frames' (poses,
     bones and heights kept). ``verify``: kept only where foot skating falls, jerk, penetration and floating do not rise
-    (over the given clip's lowest contact, as the suites judge) and, given a ``judge`` (the motion model), it finds
-    the run more real."""
+    beyond :func:`~refiner.refinement.steps.base.harms`' tolerances (over the given clip's lowest contact) and, given
+    a ``judge`` (the motion model), it finds the run more real."""
 
     name = "glide"
     moves_whole_body = True
@@ -303,7 +307,8 @@ class GlideStep:
                     continue
                 trial[s:e] -= (d @ plane_basis(skel))[:, None, :]
                 fb, fa = window_figures(out[i], s, e, skel, lowest), window_figures(trial, s, e, skel, lowest)
-                worse = harms(fb, fa, jerk_share=c.jerk_share, ground_tolerance_m=c.ground_tolerance_m)
+                worse = harms(fb, fa, jerk_share=c.jerk_share, ground_tolerance_m=c.ground_tolerance_m,
+                              slide_pairs=c.slide_pairs)
                 worse += [] if fa.slide < fb.slide else ["no less skating"]
                 if worse:
                     trial[s:e] = out[i, s:e]

@@ -25,7 +25,7 @@ __all__ = ["InfillConfig", "InfillStep", "flagged_parts", "clip_scores"]
 class InfillConfig:
     """Options of :class:`InfillStep`; ``threshold`` is calibrated (the manifest's), the others are choices.
     ``jerk_share``, ``slide_pairs`` and ``ground_tolerance_m`` (metres per frame of the window, penetration and
-    floating) are the no-harm suite's own tolerances: what it counts as worse, the verification refuses."""
+    floating) take the no-harm suite's tolerances for what verification calls worse in a window."""
 
     threshold: float
     min_run: int = 2
