@@ -135,18 +135,20 @@ def bench_refiner(data: Path | None, out: Path | None, quick: bool, *, weights: 
 SPEED_LENGTHS = (60, 240, 960, 3840)
 
 
+def _seconds(call) -> float:
+    """Wall time of one ``call()``."""
+    t0 = time.perf_counter()
+    call()
+    return time.perf_counter() - t0
+
+
 def _length_row(model, clip, n_frames: int, *, repeats: int) -> dict:
     """Median time to refine one clip of ``n_frames``, made by playing ``clip (T, J, 3)`` back and forth (no jumps);
     a clip with nothing flagged times detection, one with flagged runs adds their repair."""
     back_and_forth = np.concatenate([clip, clip[-2:0:-1]])
     long = np.resize(back_and_forth, (n_frames,) + clip.shape[1:])
     model.refine(long)
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        model.refine(long)
-        times.append(time.perf_counter() - t0)
-    ms = 1000 * float(np.median(times))
+    ms = 1000 * float(np.median([_seconds(lambda: model.refine(long)) for _ in range(repeats)]))
     return {"frames": n_frames, "median_ms": ms, "us_per_frame": 1000 * ms / n_frames}
 
 
@@ -170,18 +172,11 @@ def bench_speed(data: Path | None, out: Path | None, quick: bool, *, weights: Pa
     model = MotionRefiner.pretrained("humanact12", weights=weights)
     for x in clips[:3]:
         model.refine(x)  # warm up (first calls allocate)
-    times = []
-    for x in clips:
-        t0 = time.perf_counter()
-        model.refine(x)
-        times.append(time.perf_counter() - t0)
+    times = [_seconds(lambda x=x: model.refine(x)) for x in clips]
     batch = np.stack([clips[i % len(clips)] for i in range(batch_size)])
     model.refine(batch[:8])
-    runs = []
-    for _ in range(1 if quick else 3):  # the median of three calls: one call is at the mercy of the machine
-        t0 = time.perf_counter()
-        model.refine(batch)
-        runs.append(time.perf_counter() - t0)
+    # the median of three calls: one call is at the mercy of the machine
+    runs = [_seconds(lambda: model.refine(batch)) for _ in range(1 if quick else 3)]
     threads = model.threads or torch.get_num_threads()
     rec["devices"].append({
         "device": "cpu", "name": f"{threads} / {threads} threads (batch 1 / {batch_size})",

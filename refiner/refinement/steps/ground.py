@@ -160,9 +160,9 @@ class GroundStep:
         A run is kept where floating over the levelled floor falls, jerk, foot skating and penetration do not rise
         beyond :func:`~refiner.refinement.steps.base.harms`' tolerances, and the clip's floating over the given clip's
         lowest contact (the floor clips are usually judged on) does not rise at all."""
-        out, changes = np.array(clips, dtype=np.float64), []
+        out, changes, c = np.array(clips, dtype=np.float64), [], self.config
         root = len(get_skeleton(self.skeleton).bones)
-        floor = -self.config.bandwidth_m  # the fitted floor is known to within its bandwidth
+        floor = -c.bandwidth_m  # the fitted floor is known to within its bandwidth
         contact = list(contact_joints(self.skeleton))
         planes, gaps, founds = self.detect(out)
         for i, (clip, plane, gap, found) in enumerate(zip(out, planes, gaps, founds)):
@@ -174,7 +174,6 @@ class GroundStep:
                 for s, e in found:
                     fb = window_figures(before, s, e, self.skeleton, floor)
                     fa = window_figures(after, s, e, self.skeleton, floor)
-                    c = self.config
                     worse = harms(fb, fa, jerk_share=c.jerk_share, ground_tolerance_m=c.ground_tolerance_m,
                                   slide_pairs=c.slide_pairs)
                     trial = out[i].copy()
